@@ -1,0 +1,1 @@
+"""Pieces shared by several algorithms: batch-norm MLPs, truncated Gaussian, inverting gradients, callbacks."""

@@ -1,0 +1,96 @@
+"""Batch-normalised MLPs shared by all algorithms (paper, section 4).
+
+"The neural networks use (1) Adam, (2) the leaky rectified linearity, and (3) batch normalization. [...] The last layer
+of the critic and actor networks is linear. [...] Each weight is initialized from a normal distribution N(0, 0.01).
+Batch normalization is applied on each layer for both the actor and the critic, except on the last two layers."
+
+Counting the input as layer 0 of units u_0, ..., u_n, batch norm is applied to u_0 ... u_{n-2}, i.e. before every
+linear layer except the last one. For the critic 50-7 on Acrobot: BN(input) -> 50 -> BN -> 7 -> 1; for the actor with
+one hidden layer of 5: BN(input) -> 5 -> 1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch as th
+from torch import nn
+
+#: Weight initialisations: "paper" = N(0, 0.01^2) weights and zero biases (authors' code); "default" = PyTorch's.
+INITS = ("paper", "default")
+
+
+def paper_init_(module: nn.Module, std: float = 0.01) -> None:
+    """Re-initialise every Linear layer of ``module`` in place with N(0, std^2) weights and zero biases."""
+    for layer in module.modules():
+        if isinstance(layer, nn.Linear):
+            nn.init.normal_(layer.weight, mean=0.0, std=std)
+            nn.init.zeros_(layer.bias)
+
+
+def reset_parameters_(module: nn.Module, init: str = "paper") -> None:
+    """Re-initialise ``module`` in place (weights and batch-norm statistics), keeping the same tensors.
+
+    Used by the critic and actor resets of Algorithm 1: in-place re-initialisation keeps optimiser references valid.
+    """
+    if init not in INITS:
+        raise ValueError(f"init must be one of {INITS}, got {init!r}")
+    for layer in module.modules():
+        if isinstance(layer, (nn.Linear, nn.BatchNorm1d)):
+            layer.reset_parameters()
+    if init == "paper":
+        paper_init_(module)
+
+
+def create_bn_mlp(
+    input_dim: int,
+    output_dim: int,
+    net_arch: Sequence[int],
+    batch_norm: bool = True,
+    activation_fn: type[nn.Module] = nn.LeakyReLU,
+    bn_momentum: float = 0.1,
+    init: str = "paper",
+) -> nn.Sequential:
+    """Build ``input -> net_arch... -> output`` with a linear output layer and the paper's batch-norm placement.
+
+    :param input_dim: size of the input (state, or state + action for a Q critic).
+    :param output_dim: size of the linear output (action dimension, or 1 for a critic).
+    :param net_arch: hidden layer sizes, e.g. ``[50, 7]`` for the paper's critic.
+    :param batch_norm: apply BatchNorm1d before every linear layer except the last (paper); False gives a plain MLP.
+    :param activation_fn: hidden activation (paper: leaky ReLU, slope 0.01).
+    :param bn_momentum: PyTorch BatchNorm1d momentum for the running statistics.
+    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch's initialisation).
+    """
+    if init not in INITS:
+        raise ValueError(f"init must be one of {INITS}, got {init!r}")
+    if any(int(h) <= 0 for h in net_arch):
+        raise ValueError(f"hidden layer sizes must be positive integers, got {list(net_arch)}")
+    sizes = [input_dim, *[int(h) for h in net_arch], output_dim]
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        is_last = i == len(sizes) - 2
+        if batch_norm and not is_last:
+            layers.append(nn.BatchNorm1d(sizes[i], momentum=bn_momentum))
+        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if not is_last:
+            layers.append(activation_fn())
+    net = nn.Sequential(*layers)
+    if init == "paper":
+        paper_init_(net)
+    return net
+
+
+def set_bn_training_mode(module: nn.Module, mode: bool) -> None:
+    """Put only the batch-norm layers of ``module`` in train (batch statistics) or eval (running statistics) mode."""
+    for layer in module.modules():
+        if isinstance(layer, nn.modules.batchnorm._BatchNorm):
+            layer.train(mode)
+
+
+def has_batch_norm(module: nn.Module) -> bool:
+    return any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in module.modules())
+
+
+def flat_parameters(module: nn.Module) -> th.Tensor:
+    """All parameters of ``module`` as one detached 1-d tensor (for tests and the CMA-ES search space)."""
+    return th.cat([p.detach().reshape(-1) for p in module.parameters()])

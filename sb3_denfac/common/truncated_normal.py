@@ -1,0 +1,83 @@
+"""Truncated Gaussian exploration and Retrace-style importance weights.
+
+The paper (section 4) explores with "a truncated Gaussian policy between [a_min = -1, a_max = 1] with sigma = 0.05 where
+the mean is determined by the output of the last linear layer". This is a proper truncated normal (mass renormalised
+inside the bounds), not additive noise followed by clipping: clipping would put probability mass on the bounds and
+give no density to evaluate in the importance weight of Algorithm 1.
+
+Following the authors' code, the mean is clamped to ``[low - 3 sigma, high + 3 sigma]`` before the density is formed:
+an unbounded actor (inverting gradients) may output means far outside the bounds, where the in-bound mass underflows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch as th
+from scipy import special
+
+#: How far outside the bounds (in units of sigma) a mean may lie before it is clamped (authors' code: 3).
+MEAN_CLAMP_SIGMAS = 3.0
+
+
+def _check_sigma(sigma: float) -> None:
+    if not np.isfinite(sigma) or sigma <= 0:
+        raise ValueError(f"sigma (exploration std of the truncated Gaussian) must be a positive number, got {sigma}")
+
+
+def clamp_mean(mean, low, high, sigma: float):
+    """Clamp a behaviour mean to ``[low - 3 sigma, high + 3 sigma]`` (works for numpy arrays and torch tensors)."""
+    lo, hi = low - MEAN_CLAMP_SIGMAS * sigma, high + MEAN_CLAMP_SIGMAS * sigma
+    if isinstance(mean, th.Tensor):
+        return th.maximum(th.minimum(mean, hi), lo)
+    return np.clip(mean, lo, hi)
+
+
+def sample_truncated_normal(
+    mean: np.ndarray, sigma: float, low: np.ndarray, high: np.ndarray, rng: np.random.Generator | None = None
+) -> np.ndarray:
+    """Draw one action per mean from N(mean, sigma^2) truncated to [low, high] by inverse-CDF sampling.
+
+    :param mean: behaviour means mu_b(s), shape (..., action_dim); clamped as in the authors' code.
+    :param sigma: standard deviation sigma of the Gaussian before truncation (paper: 0.05).
+    :param low: lower action bound a_min (broadcastable to ``mean``).
+    :param high: upper action bound a_max.
+    :param rng: numpy random generator; defaults to the global ``np.random`` state, which SB3's ``set_random_seed`` seeds.
+    :return: samples, always inside [low, high], same shape and dtype as ``mean``.
+    """
+    _check_sigma(sigma)
+    mean64 = clamp_mean(np.asarray(mean, dtype=np.float64), np.asarray(low, np.float64), np.asarray(high, np.float64), sigma)
+    alpha = (np.asarray(low, np.float64) - mean64) / sigma
+    beta = (np.asarray(high, np.float64) - mean64) / sigma
+    u = rng.random(mean64.shape) if rng is not None else np.random.random_sample(mean64.shape)
+    # Inverse CDF on [Phi(alpha), Phi(beta)]; ndtri(ndtr(x)) is exact enough for |x| <= 3 + range / sigma in float64.
+    cdf_lo, cdf_hi = special.ndtr(alpha), special.ndtr(beta)
+    z = special.ndtri(cdf_lo + u * (cdf_hi - cdf_lo))
+    sample = np.clip(mean64 + sigma * z, low, high)  # clip only guards against round-off at the bounds
+    return sample.astype(np.asarray(mean).dtype if np.asarray(mean).dtype.kind == "f" else np.float32)
+
+
+def truncated_normal_log_prob(actions: th.Tensor, mean: th.Tensor, sigma: float, low: th.Tensor, high: th.Tensor) -> th.Tensor:
+    """Log-density of ``actions`` under N(mean, sigma^2) truncated to [low, high], summed over action dimensions.
+
+    The joint density is the product over dimensions, as the authors' ``p0 = prod_j TG(a_j; mu_j, sigma)``.
+
+    :return: tensor of shape (batch,) with log pi(a|s).
+    """
+    _check_sigma(sigma)
+    dtype = th.float64
+    a, mu = actions.to(dtype), clamp_mean(mean.to(dtype), low.to(dtype), high.to(dtype), sigma)
+    lo, hi = low.to(dtype), high.to(dtype)
+    z = (a - mu) / sigma
+    log_phi = -0.5 * z**2 - 0.5 * np.log(2 * np.pi) - np.log(sigma)
+    log_mass = th.log(th.special.ndtr((hi - mu) / sigma) - th.special.ndtr((lo - mu) / sigma))
+    return (log_phi - log_mass).sum(dim=-1).to(actions.dtype)
+
+
+def truncated_importance_weights(log_prob_target: th.Tensor, log_prob_behaviour: th.Tensor) -> th.Tensor:
+    """Retrace-style truncated importance weight c = min(1, pi_{k-1}(a|s) / pi_b(a|s)) (paper, eq. 4 and Algorithm 1).
+
+    Truncating at 1 (Munos et al. 2016) keeps the weighted critic loss's variance bounded: samples the current policy
+    would play more often than the behaviour policy did are not up-weighted, only unlikely ones are down-weighted.
+    Computed in log space so tiny densities do not underflow to 0/0.
+    """
+    return th.exp(th.clamp(log_prob_target - log_prob_behaviour, max=0.0))
