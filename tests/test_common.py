@@ -1,0 +1,147 @@
+"""Shared numerical pieces: truncated Gaussian (against scipy), importance weights, inverting gradients, BN MLPs."""
+
+import numpy as np
+import pytest
+import torch as th
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+from torch import nn
+
+from sb3_denfac.common.inverting_gradients import invert_gradients, inverting_gradient_actor_backward
+from sb3_denfac.common.networks import create_bn_mlp, flat_parameters, reset_parameters_, set_bn_training_mode
+from sb3_denfac.common.truncated_normal import (
+    clamp_mean,
+    sample_truncated_normal,
+    truncated_importance_weights,
+    truncated_normal_log_prob,
+)
+
+means = st.floats(min_value=-3.0, max_value=3.0)
+sigmas = st.floats(min_value=0.01, max_value=2.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(mean=means, sigma=sigmas, action=st.floats(min_value=-1.0, max_value=1.0))
+def test_log_prob_matches_scipy_truncnorm(mean, sigma, action):
+    clamped = float(clamp_mean(np.float64(mean), -1.0, 1.0, sigma))
+    ref = stats.truncnorm.logpdf(action, (-1 - clamped) / sigma, (1 - clamped) / sigma, loc=clamped, scale=sigma)
+    got = truncated_normal_log_prob(
+        th.tensor([[action]], dtype=th.float64), th.tensor([[mean]], dtype=th.float64), sigma, th.tensor(-1.0), th.tensor(1.0)
+    )
+    assert got.shape == (1,)
+    assert got.item() == pytest.approx(ref, rel=1e-6, abs=1e-6)
+
+
+def test_log_prob_sums_over_action_dims():
+    actions = th.tensor([[0.1, -0.3], [0.9, 0.0]])
+    mean = th.tensor([[0.0, -0.2], [1.2, 0.05]])
+    low, high = th.tensor([-1.0, -1.0]), th.tensor([1.0, 1.0])
+    joint = truncated_normal_log_prob(actions, mean, 0.3, low, high)
+    per_dim = [truncated_normal_log_prob(actions[:, j : j + 1], mean[:, j : j + 1], 0.3, low[:1], high[:1]) for j in range(2)]
+    th.testing.assert_close(joint, per_dim[0] + per_dim[1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(mean=st.floats(min_value=-20.0, max_value=20.0), sigma=sigmas, seed=st.integers(0, 2**31 - 1))
+def test_samples_stay_in_bounds(mean, sigma, seed):
+    rng = np.random.default_rng(seed)
+    samples = sample_truncated_normal(np.full((64, 2), mean, dtype=np.float32), sigma, -1.0, 1.0, rng)
+    assert samples.dtype == np.float32 and samples.shape == (64, 2)
+    assert np.all(samples >= -1.0) and np.all(samples <= 1.0)
+
+
+@pytest.mark.parametrize("mean,sigma", [(0.0, 0.05), (0.97, 0.05), (-1.1, 0.05), (0.3, 0.5)])
+def test_samples_follow_scipy_truncnorm(mean, sigma):
+    rng = np.random.default_rng(0)
+    samples = sample_truncated_normal(np.full(4000, mean), sigma, -1.0, 1.0, rng)
+    ref = stats.truncnorm((-1 - mean) / sigma, (1 - mean) / sigma, loc=mean, scale=sigma)
+    assert stats.kstest(samples, ref.cdf).pvalue > 1e-3
+
+
+def test_samples_respect_asymmetric_bounds():
+    low, high = np.array([0.0, -2.0]), np.array([0.5, 3.0])
+    samples = sample_truncated_normal(np.tile([0.45, 2.9], (1000, 1)), 0.2, low, high, np.random.default_rng(1))
+    assert np.all(samples >= low) and np.all(samples <= high)
+
+
+@pytest.mark.parametrize("sigma", [0.0, -0.1, float("nan")])
+def test_bad_sigma_is_rejected(sigma):
+    with pytest.raises(ValueError, match="sigma"):
+        sample_truncated_normal(np.zeros(1), sigma, -1.0, 1.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(lp_t=st.floats(-50, 50), lp_b=st.floats(-50, 50))
+def test_importance_weights_are_truncated_ratios(lp_t, lp_b):
+    w = truncated_importance_weights(th.tensor([lp_t], dtype=th.float64), th.tensor([lp_b], dtype=th.float64)).item()
+    assert 0.0 <= w <= 1.0
+    assert w == pytest.approx(min(1.0, np.exp(lp_t - lp_b)), rel=1e-9, abs=1e-300)
+
+
+@settings(max_examples=80, deadline=None)
+@given(grad=st.floats(-10, 10), action=st.floats(-3, 3))
+def test_inverting_gradients_never_push_past_a_bound(grad, action):
+    out = invert_gradients(th.tensor([grad]), th.tensor([action]), th.tensor([-1.0]), th.tensor([1.0])).item()
+    if action >= 1.0:
+        assert out <= 0.0  # at or beyond a_max: never pushed further up
+    if action <= -1.0:
+        assert out >= 0.0
+    if -1.0 < action < 1.0:
+        assert out * grad >= 0.0 and abs(out) <= abs(grad)  # same direction, never amplified
+
+
+def test_inverting_gradients_scale_as_hausknecht_and_stone():
+    grad = th.tensor([2.0, 2.0, -2.0, -2.0])
+    actions = th.tensor([0.5, -0.5, 0.5, -0.5])
+    out = invert_gradients(grad, actions, th.tensor(-1.0), th.tensor(1.0))
+    # increase: scaled by (a_max - a)/span; decrease: scaled by (a - a_min)/span
+    th.testing.assert_close(out, th.tensor([2 * 0.25, 2 * 0.75, -2 * 0.75, -2 * 0.25]))
+
+
+def test_inverting_gradient_actor_keeps_actions_in_bounds():
+    """An actor maximising a Q that always wants larger actions converges to a_max, not beyond."""
+    th.manual_seed(0)
+    actor = nn.Linear(3, 1)
+    obs = th.randn(256, 3)
+    optimizer = th.optim.SGD(actor.parameters(), lr=0.5)
+    for _ in range(400):
+        optimizer.zero_grad()
+        actions = actor(obs)
+        inverting_gradient_actor_backward(5.0 * actions.sum(dim=1), actions, th.tensor(-1.0), th.tensor(1.0))
+        optimizer.step()
+    final = actor(obs).detach()
+    assert final.max() <= 1.05
+    assert final.mean() > 0.8
+
+
+def test_bn_mlp_layout_follows_the_paper():
+    critic = create_bn_mlp(5, 1, [50, 7])
+    kinds = [type(m).__name__ for m in critic]
+    assert kinds == ["BatchNorm1d", "Linear", "LeakyReLU", "BatchNorm1d", "Linear", "LeakyReLU", "Linear"]
+    actor = create_bn_mlp(4, 1, [5])
+    assert [type(m).__name__ for m in actor] == ["BatchNorm1d", "Linear", "LeakyReLU", "Linear"]
+    plain = create_bn_mlp(4, 1, [5], batch_norm=False)
+    assert not any(isinstance(m, nn.BatchNorm1d) for m in plain)
+
+
+def test_paper_init_and_in_place_reset():
+    net = create_bn_mlp(4, 2, [20, 10], init="paper")
+    weights = th.cat([m.weight.reshape(-1) for m in net if isinstance(m, nn.Linear)])
+    assert 0.005 < weights.std().item() < 0.02
+    assert all(th.all(m.bias == 0) for m in net if isinstance(m, nn.Linear))
+    tensors_before = [p.data_ptr() for p in net.parameters()]
+    values_before = flat_parameters(net)
+    set_bn_training_mode(net, True)
+    net(th.randn(32, 4) * 5 + 3)  # moves running statistics
+    reset_parameters_(net, init="paper")
+    assert [p.data_ptr() for p in net.parameters()] == tensors_before  # optimizer references stay valid
+    assert not th.equal(values_before, flat_parameters(net))
+    assert th.all(net[0].running_mean == 0)
+
+
+def test_bad_network_arguments_are_rejected():
+    with pytest.raises(ValueError, match="init"):
+        create_bn_mlp(4, 1, [5], init="xavier")
+    with pytest.raises(ValueError, match="hidden layer sizes"):
+        create_bn_mlp(4, 1, [0])
