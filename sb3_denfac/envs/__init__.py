@@ -1,0 +1,84 @@
+"""The DENFAC paper's environments (Zimmer, Boniface, Dutech, "Off-Policy Neural Fitted Actor-Critic", section 4).
+
+Registered ids (all with ``Box(-1, 1)`` float32 actions and ``info["paper_performance"]`` on the last step):
+
+- ``sb3_denfac/ContinuousAcrobot-v0``: double swing-up, 500 steps, gamma 0.9, performance = steps to the goal.
+- ``sb3_denfac/ContinuousCartPole-v0``: balance in a box, 500 steps, gamma 0.99, performance = episode return.
+- ``sb3_denfac/HalfCheetahPaper-v0``: HalfCheetah-v5 with the paper's reward, 500 steps, gamma 0.99,
+  performance = episode return.
+
+Each registered env is a reward wrapper (reusable on other envs with the same state) around a continuous-action
+base env, packed into one ``gymnasium.Env``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+
+from sb3_denfac.envs.acrobot import (
+    AcrobotSwingUpReward,
+    ContinuousAcrobotEnv,
+    ContinuousAcrobotPaperEnv,
+    acrobot_tip_height,
+)
+from sb3_denfac.envs.cartpole import CartPoleBalanceReward, ContinuousCartPoleEnv, ContinuousCartPolePaperEnv
+from sb3_denfac.envs.common import PAPER_PERFORMANCE_KEY, EpisodeRewardWrapper, PaperEnv
+
+ENV_IDS = (
+    "sb3_denfac/ContinuousAcrobot-v0",
+    "sb3_denfac/ContinuousCartPole-v0",
+    "sb3_denfac/HalfCheetahPaper-v0",
+)
+_ENTRY_POINTS = (
+    "sb3_denfac.envs.acrobot:ContinuousAcrobotPaperEnv",
+    "sb3_denfac.envs.cartpole:ContinuousCartPolePaperEnv",
+    "sb3_denfac.envs.half_cheetah:HalfCheetahPaperEnv",
+)
+
+
+_HALF_CHEETAH_NAMES = (
+    "HalfCheetahContactEnv",
+    "HalfCheetahPaperEnv",
+    "HalfCheetahPaperReward",
+    "PENALISED_GEOMS",
+    "floor_contact_geoms",
+)
+
+
+def __getattr__(name: str) -> Any:
+    # Lazy: importing MuJoCo is only needed for the Half-Cheetah.
+    if name in _HALF_CHEETAH_NAMES:
+        from sb3_denfac.envs import half_cheetah
+
+        return getattr(half_cheetah, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def register_envs() -> None:
+    """Register the paper's environments with Gymnasium (idempotent)."""
+    for env_id, entry_point in zip(ENV_IDS, _ENTRY_POINTS, strict=True):
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point=entry_point, max_episode_steps=500)
+
+
+__all__ = [
+    "ENV_IDS",
+    "PAPER_PERFORMANCE_KEY",
+    "AcrobotSwingUpReward",
+    "ContinuousAcrobotEnv",
+    "ContinuousAcrobotPaperEnv",
+    "CartPoleBalanceReward",
+    "ContinuousCartPoleEnv",
+    "ContinuousCartPolePaperEnv",
+    "EpisodeRewardWrapper",
+    "HalfCheetahContactEnv",
+    "HalfCheetahPaperEnv",
+    "HalfCheetahPaperReward",
+    "PENALISED_GEOMS",
+    "PaperEnv",
+    "acrobot_tip_height",
+    "floor_contact_geoms",
+    "register_envs",
+]
