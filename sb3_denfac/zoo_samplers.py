@@ -1,0 +1,110 @@
+"""Optuna samplers and converters for the RL Zoo (``rl_zoo3.hyperparams_opt`` conventions).
+
+Each ``sample_<algo>_params(trial, n_actions, n_envs, additional_args)`` suggests values under the names stored in
+``trial.params`` and returns ``convert_<algo>_params(those values)``, so the zoo's ``--trial-id`` path (which calls the
+converter on a stored trial's params) rebuilds exactly the hyperparameters that trial trained with.
+
+Search spaces follow the dimensions of the paper's Figure 5 (learning rates alpha_a / alpha_c, inverting gradient,
+mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes.
+gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
+``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
+
+The YAML entry's other ``policy_kwargs`` (activation, batch norm, init) are kept: :data:`SAMPLER_CONTEXT` holds them
+(set by :func:`sb3_denfac.zoo.prepare_train_args`) and the sampled ``net_arch`` is merged into a copy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import optuna
+
+#: ``policy_kwargs`` of the YAML entry being tuned (set by ``sb3_denfac.zoo``); sampled keys are merged into a copy.
+SAMPLER_CONTEXT: dict[str, Any] = {"policy_kwargs": {}}
+
+#: Network sizes offered to Optuna, by name (categorical choices must be plain values).
+ACTOR_ARCHS: dict[str, list[int]] = {"5": [5], "20": [20], "20-10": [20, 10], "64-64": [64, 64]}
+CRITIC_ARCHS: dict[str, list[int]] = {"50-7": [50, 7], "64-64": [64, 64], "256-256": [256, 256]}
+
+
+def _policy_kwargs(params: dict[str, Any], critic: bool = True, critic_key: str = "qf") -> dict[str, Any]:
+    """The YAML entry's policy_kwargs with the sampled ``net_arch``."""
+    policy_kwargs = dict(SAMPLER_CONTEXT.get("policy_kwargs") or {})
+    if "actor_arch" in params:
+        net_arch: dict[str, list[int]] = {"pi": list(ACTOR_ARCHS[params["actor_arch"]])}
+        if critic and "critic_arch" in params:
+            net_arch[critic_key] = list(CRITIC_ARCHS[params["critic_arch"]])
+        policy_kwargs["net_arch"] = net_arch
+    return policy_kwargs
+
+
+def _copy_except(params: dict[str, Any], *names: str) -> dict[str, Any]:
+    return {k: v for k, v in params.items() if k not in names}
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# DENFAC
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch")
+    hyperparams["policy_kwargs"] = _policy_kwargs(params)
+    return hyperparams
+
+
+def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes."""
+    params = {
+        "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
+        "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
+        "n_fitted_iterations": trial.suggest_int("n_fitted_iterations", 1, 20),
+        "actor_steps": trial.suggest_int("actor_steps", 5, 50),
+        "critic_steps": trial.suggest_int("critic_steps", 5, 50),
+        "buffer_size": trial.suggest_categorical("buffer_size", [1000, 3000, 6000, 10000]),
+        "reset_critic": trial.suggest_categorical("reset_critic", [False, True]),
+        "inverting_gradients": trial.suggest_categorical("inverting_gradients", [False, True]),
+        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
+        "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
+        "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
+    }
+    return convert_denfac_params(params)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# DDPG (ours: inverting gradients, batch norm, truncated Gaussian exploration)
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def convert_ddpg_params(params: dict[str, Any]) -> dict[str, Any]:
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "batch_size_pow")
+    if "batch_size_pow" in params:
+        hyperparams["batch_size"] = 2 ** params["batch_size_pow"]
+    hyperparams["policy_kwargs"] = _policy_kwargs(params)
+    return hyperparams
+
+
+def sample_ddpg_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """DDPG: alpha_a, alpha_c, inverting gradient, mini-batch, tau, additional updates, sigma, network sizes."""
+    params = {
+        "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 0.1, log=True),
+        "inverting_gradients": trial.suggest_categorical("inverting_gradients", [False, True]),
+        "batch_size_pow": trial.suggest_int("batch_size_pow", 5, 8),  # 32 .. 256 (paper: 64)
+        "tau": trial.suggest_float("tau", 1e-3, 0.1, log=True),
+        "gradient_steps": trial.suggest_int("gradient_steps", 1, 16),  # "additional updates" per env step
+        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
+        "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
+        "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
+    }
+    return convert_ddpg_params(params)
+
+
+SAMPLERS = {
+    "denfac": sample_denfac_params,
+    "ddpg": sample_ddpg_params,
+}
+CONVERTERS = {
+    "denfac": convert_denfac_params,
+    "ddpg": convert_ddpg_params,
+}
