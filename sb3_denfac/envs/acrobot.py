@@ -157,7 +157,8 @@ class ContinuousAcrobotPaperEnv(PaperEnv):
     Observation ``Box(4,)`` float32 ``[th1, dth1, th2, dth2]``, action ``Box(-1, 1, (1,))`` float32 (torque
     ``a * max_torque``), reward of :class:`AcrobotSwingUpReward`, ``paper_performance`` = steps to reach the goal
     (500 if not reached; lower is better). Arguments are those of :class:`ContinuousAcrobotEnv` and
-    :class:`AcrobotSwingUpReward`.
+    :class:`AcrobotSwingUpReward`, except ``episode_length`` (the wrapper's ``max_episode_steps``, see
+    :class:`~sb3_denfac.envs.common.PaperEnv`).
     """
 
     metadata = ContinuousAcrobotEnv.metadata
@@ -166,11 +167,11 @@ class ContinuousAcrobotPaperEnv(PaperEnv):
         self,
         max_torque: float = 1.5,
         goal_height: float = 0.99,
-        max_episode_steps: int | None = 500,
+        episode_length: int = 500,
         random_start: bool = False,
         obs_type: str = "paper",
         n_substeps: int = 1,
         render_mode: str | None = None,
     ) -> None:
         base = ContinuousAcrobotEnv(max_torque, random_start, obs_type, n_substeps, render_mode)
-        super().__init__(AcrobotSwingUpReward(base, goal_height, max_episode_steps))
+        super().__init__(AcrobotSwingUpReward(base, goal_height, episode_length))

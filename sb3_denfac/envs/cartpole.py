@@ -159,7 +159,8 @@ class ContinuousCartPolePaperEnv(PaperEnv):
     Observation ``Box(4,)`` float32 ``[x, x_dot, theta, theta_dot]``, action ``Box(-1, 1, (1,))`` float32 (force
     ``a * 10`` N), reward of :class:`CartPoleBalanceReward`, ``paper_performance`` = episode return (0 is the
     best, -998 the worst). Arguments are those of :class:`ContinuousCartPoleEnv` and :class:`CartPoleBalanceReward`
-    (the failure thresholds are shared by both).
+    (the failure thresholds are shared by both), except ``episode_length`` (the wrapper's ``max_episode_steps``,
+    see :class:`~sb3_denfac.envs.common.PaperEnv`).
     """
 
     metadata = ContinuousCartPoleEnv.metadata
@@ -171,12 +172,12 @@ class ContinuousCartPolePaperEnv(PaperEnv):
         x_threshold: float = 2.4,
         box_x: float = 0.05,
         box_theta: float = math.pi / 60,
-        max_episode_steps: int = 500,
+        episode_length: int = 500,
         random_start: bool = False,
         render_mode: str | None = None,
     ) -> None:
         base = ContinuousCartPoleEnv(force_mag, theta_threshold_radians, x_threshold, random_start, render_mode)
         wrapped = CartPoleBalanceReward(
-            base, x_threshold, theta_threshold_radians, box_x, box_theta, max_episode_steps=max_episode_steps
+            base, x_threshold, theta_threshold_radians, box_x, box_theta, max_episode_steps=episode_length
         )
         super().__init__(wrapped)

@@ -74,6 +74,12 @@ class PaperEnv(gym.Env):
     includes the paper's reward (gymnasium's checker and SB3 see one raw environment). The inner chain is available as
     ``self.env`` and the dynamics env as ``self.base_env``.
 
+    Episode length: the reward wrapper counts steps itself (constructor argument ``episode_length``, default 500,
+    registered as ``max_episode_steps=500`` too). ``gym.make(id, max_episode_steps=N)`` only changes gymnasium's
+    outer ``TimeLimit``, which the env cannot see: pass ``episode_length=N`` as well, e.g.
+    ``gym.make(id, max_episode_steps=N, episode_length=N)``, or the last step misses the paper's last-step reward
+    and ``paper_performance``.
+
     :param env: The wrapped environment (a reward wrapper around a base env).
     """
 

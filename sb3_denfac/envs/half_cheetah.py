@@ -144,7 +144,7 @@ class HalfCheetahPaperEnv(PaperEnv):
     :param head_contact_reward: See :class:`HalfCheetahPaperReward` (default -1000).
     :param ctrl_cost_weight: See :class:`HalfCheetahPaperReward` (default 0.05).
     :param contact_cost: See :class:`HalfCheetahPaperReward` (default 1).
-    :param max_episode_steps: Episode length (default 500).
+    :param episode_length: Episode length (default 500), see :class:`~sb3_denfac.envs.common.PaperEnv`.
     :param kwargs: Passed to :class:`HalfCheetahContactEnv` (HalfCheetah-v5 arguments, ``render_mode``...).
     """
 
@@ -156,11 +156,11 @@ class HalfCheetahPaperEnv(PaperEnv):
         head_contact_reward: float = -1000.0,
         ctrl_cost_weight: float = 0.05,
         contact_cost: float = 1.0,
-        max_episode_steps: int | None = 500,
+        episode_length: int = 500,
         **kwargs: Any,
     ) -> None:
         base = HalfCheetahContactEnv(**kwargs)
         wrapped = HalfCheetahPaperReward(
-            base, ctrl_cost_weight, contact_cost, terminate_on_head_contact, head_contact_reward, max_episode_steps
+            base, ctrl_cost_weight, contact_cost, terminate_on_head_contact, head_contact_reward, episode_length
         )
         super().__init__(wrapped)
