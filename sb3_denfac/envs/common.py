@@ -88,6 +88,7 @@ class PaperEnv(gym.Env):
         self.observation_space = env.observation_space
         self.action_space = env.action_space
         self.render_mode = env.render_mode
+        self.metadata = env.unwrapped.metadata
 
     @property
     def base_env(self) -> gym.Env:
