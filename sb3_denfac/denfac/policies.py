@@ -1,0 +1,307 @@
+"""DENFAC networks: an unbounded deterministic actor mu(s) and a Q(s, a) critic, both batch-normalised MLPs.
+
+Paper, section 4: leaky ReLU, batch normalisation on every layer except the last two, linear last layer, weights
+N(0, 0.01). Critic hidden layers 50-7; actor hidden layers 5 (Acrobot), 20 (Cartpole), 20-10 (Half-Cheetah).
+Actions live in SB3's scaled space [-1, 1]; the actor output is unbounded (inverting gradients keep it in bounds).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BaseModel, BasePolicy
+from stable_baselines3.common.preprocessing import get_action_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from torch import nn
+
+from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
+from sb3_denfac.common.truncated_normal import clamp_mean, sample_truncated_normal
+
+DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "qf": [50, 7]}
+
+
+class DENFACActor(BasePolicy):
+    """Deterministic actor mu(s) with a linear (unbounded) output in the scaled action space.
+
+    :param observation_space: observation space
+    :param action_space: Box action space
+    :param net_arch: hidden layer sizes
+    :param features_extractor: network extracting features (``nn.Flatten`` for vectors)
+    :param features_dim: number of features
+    :param activation_fn: hidden activation (paper: leaky ReLU)
+    :param batch_norm: batch normalisation before every linear layer but the last (paper)
+    :param bn_momentum: BatchNorm1d momentum (None: cumulative average, see DENFAC)
+    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default"
+    :param sigma: std of the truncated Gaussian exploration (paper: 0.05), in the scaled action space
+    :param normalize_images: whether to normalise images (unused for vector observations)
+    """
+
+    action_space: spaces.Box
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        net_arch: list[int],
+        features_extractor: nn.Module,
+        features_dim: int,
+        activation_fn: type[nn.Module] = nn.LeakyReLU,
+        batch_norm: bool = True,
+        bn_momentum: float | None = None,
+        init: str = "paper",
+        sigma: float = 0.05,
+        normalize_images: bool = True,
+    ):
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor=features_extractor,
+            normalize_images=normalize_images,
+            squash_output=True,  # predict() un-scales from [-1, 1]; _predict() returns actions inside [-1, 1]
+        )
+        self.net_arch = net_arch
+        self.features_dim = features_dim
+        self.activation_fn = activation_fn
+        self.batch_norm = batch_norm
+        self.bn_momentum = bn_momentum
+        self.init = init
+        self.sigma = sigma
+        action_dim = get_action_dim(self.action_space)
+        self.mu = create_bn_mlp(
+            features_dim,
+            action_dim,
+            net_arch,
+            batch_norm,
+            activation_fn,
+            bn_momentum,
+            init,  # type: ignore[arg-type]
+        )
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            dict(
+                net_arch=self.net_arch,
+                features_dim=self.features_dim,
+                activation_fn=self.activation_fn,
+                batch_norm=self.batch_norm,
+                bn_momentum=self.bn_momentum,
+                init=self.init,
+                sigma=self.sigma,
+                features_extractor=self.features_extractor,
+            )
+        )
+        return data
+
+    def forward(self, obs: th.Tensor) -> th.Tensor:
+        """Unbounded mean mu(s) in the scaled action space."""
+        return self.mu(self.extract_features(obs, self.features_extractor))
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        mean = self(observation)
+        if deterministic:
+            return mean.clamp(-1.0, 1.0)
+        return th.as_tensor(self.sample(mean.cpu().numpy()), device=mean.device)
+
+    def sample(self, mean: np.ndarray) -> np.ndarray:
+        """Truncated Gaussian N(mean, sigma^2) on [-1, 1] (numpy, seeded by SB3 through ``np.random``)."""
+        return sample_truncated_normal(mean, self.sigma, -1.0, 1.0)
+
+    def behaviour_mean(self, mean: th.Tensor | np.ndarray):
+        """The mean stored as mu_b(s): clamped to [-1 - 3 sigma, 1 + 3 sigma] as the shared density does."""
+        return clamp_mean(mean, -1.0, 1.0, self.sigma)
+
+
+class DENFACCritic(BaseModel):
+    """Q(s, a) on the concatenation of features and scaled action, one linear output.
+
+    :param observation_space: observation space
+    :param action_space: Box action space
+    :param net_arch: hidden layer sizes (paper: [50, 7])
+    :param features_extractor: network extracting features
+    :param features_dim: number of features
+    :param activation_fn: hidden activation
+    :param batch_norm: batch normalisation before every linear layer but the last
+    :param bn_momentum: BatchNorm1d momentum (None: cumulative average)
+    :param init: "paper" or "default"
+    :param normalize_images: whether to normalise images
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        net_arch: list[int],
+        features_extractor: BaseFeaturesExtractor,
+        features_dim: int,
+        activation_fn: type[nn.Module] = nn.LeakyReLU,
+        batch_norm: bool = True,
+        bn_momentum: float | None = None,
+        init: str = "paper",
+        normalize_images: bool = True,
+    ):
+        super().__init__(
+            observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
+        )
+        action_dim = get_action_dim(self.action_space)
+        self.qf = create_bn_mlp(
+            features_dim + action_dim,
+            1,
+            net_arch,
+            batch_norm,
+            activation_fn,
+            bn_momentum,
+            init,  # type: ignore[arg-type]
+        )
+
+    def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        features = self.extract_features(obs, self.features_extractor)
+        return self.qf(th.cat([features, actions], dim=1))
+
+
+class DENFACPolicy(BasePolicy):
+    """Actor mu(s) and critic Q(s, a) of DENFAC, each with its own Adam optimiser.
+
+    :param observation_space: observation space
+    :param action_space: Box action space
+    :param lr_schedule: SB3 learning-rate schedule (used for both networks unless a rate is given below)
+    :param net_arch: ``dict(pi=[...], qf=[...])`` or one list for both (default pi=[20], qf=[50, 7])
+    :param activation_fn: hidden activation (paper: leaky ReLU, slope 0.01)
+    :param batch_norm: batch normalisation as in the paper
+    :param bn_momentum: BatchNorm1d momentum; None (default) = cumulative average over the steps since the last
+        reset of the running statistics (DENFAC resets them at every fit, so eval mode uses the buffer's statistics)
+    :param init: "paper" (N(0, 0.01^2)) or "default" (PyTorch) initialisation
+    :param sigma: exploration std of the truncated Gaussian on [-1, 1]
+    :param actor_learning_rate: alpha_a (overrides ``lr_schedule`` for the actor if not None)
+    :param critic_learning_rate: alpha_c (overrides ``lr_schedule`` for the critic if not None)
+    :param features_extractor_class: features extractor (default: flatten)
+    :param features_extractor_kwargs: its keyword arguments
+    :param normalize_images: whether to normalise images
+    :param optimizer_class: optimiser (default Adam)
+    :param optimizer_kwargs: optimiser keyword arguments (DENFAC passes ``betas`` and ``eps``)
+    """
+
+    actor: DENFACActor
+    critic: DENFACCritic
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Schedule,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
+        activation_fn: type[nn.Module] = nn.LeakyReLU,
+        batch_norm: bool = True,
+        bn_momentum: float | None = None,
+        init: str = "paper",
+        sigma: float = 0.05,
+        actor_learning_rate: float | None = None,
+        critic_learning_rate: float | None = None,
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+    ):
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor_class,
+            features_extractor_kwargs,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+            squash_output=True,
+            normalize_images=normalize_images,
+        )
+        if net_arch is None:
+            net_arch = dict(DEFAULT_NET_ARCH)
+        if isinstance(net_arch, dict):
+            pi_arch, qf_arch = (
+                list(net_arch.get("pi", DEFAULT_NET_ARCH["pi"])),
+                list(net_arch.get("qf", DEFAULT_NET_ARCH["qf"])),
+            )
+        else:
+            pi_arch, qf_arch = list(net_arch), list(net_arch)
+        self.net_arch = net_arch
+        self.activation_fn = activation_fn
+        self.batch_norm = batch_norm
+        self.bn_momentum = bn_momentum
+        self.init = init
+        self.sigma = sigma
+        self.actor_learning_rate = actor_learning_rate
+        self.critic_learning_rate = critic_learning_rate
+        common = dict(
+            observation_space=self.observation_space,
+            action_space=self.action_space,
+            activation_fn=activation_fn,
+            batch_norm=batch_norm,
+            bn_momentum=bn_momentum,
+            init=init,
+            normalize_images=normalize_images,
+        )
+        self.actor_kwargs = {**common, "net_arch": pi_arch, "sigma": sigma}
+        self.critic_kwargs = {**common, "net_arch": qf_arch}
+        self._build(lr_schedule)
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        self.actor = DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
+        self.critic = DENFACCritic(**self._update_features_extractor(self.critic_kwargs))  # type: ignore[arg-type]
+        self.actor.optimizer = self.make_optimizer(self.actor, self.actor_learning_rate, lr_schedule)
+        self.critic.optimizer = self.make_optimizer(self.critic, self.critic_learning_rate, lr_schedule)
+
+    def make_optimizer(self, net: nn.Module, rate: float | None, lr_schedule: Schedule) -> th.optim.Optimizer:
+        lr = rate if rate is not None else lr_schedule(1)
+        return self.optimizer_class(net.parameters(), lr=lr, **self.optimizer_kwargs)  # type: ignore[call-arg]
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            dict(
+                net_arch=self.net_arch,
+                activation_fn=self.activation_fn,
+                batch_norm=self.batch_norm,
+                bn_momentum=self.bn_momentum,
+                init=self.init,
+                sigma=self.sigma,
+                actor_learning_rate=self.actor_learning_rate,
+                critic_learning_rate=self.critic_learning_rate,
+                lr_schedule=self._dummy_schedule,
+                optimizer_class=self.optimizer_class,
+                optimizer_kwargs=self.optimizer_kwargs,
+                features_extractor_class=self.features_extractor_class,
+                features_extractor_kwargs=self.features_extractor_kwargs,
+            )
+        )
+        return data
+
+    def forward(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self._predict(observation, deterministic=deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self.actor._predict(observation, deterministic=deterministic)
+
+    def set_training_mode(self, mode: bool) -> None:
+        self.actor.set_training_mode(mode)
+        self.critic.set_training_mode(mode)
+        self.training = mode
+
+    def reset_actor(self) -> None:
+        """Re-initialise the actor in place (weights and BN statistics) and forget its Adam state."""
+        reset_parameters_(self.actor, self.init)
+        self.actor.optimizer.state.clear()
+
+    def reset_critic(self) -> None:
+        """Re-initialise the critic in place (weights and BN statistics) and forget its Adam state."""
+        reset_parameters_(self.critic, self.init)
+        self.critic.optimizer.state.clear()
+
+    @staticmethod
+    def set_bn_training_mode(net: nn.Module, mode: bool) -> None:
+        set_bn_training_mode(net, mode)
+
+
+MlpPolicy = DENFACPolicy

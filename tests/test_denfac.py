@@ -1,0 +1,224 @@
+"""DENFAC-specific tests (Algorithm 1 as an SB3 algorithm). Shared pieces are tested in tests/test_common.py."""
+
+from __future__ import annotations
+
+import copy
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from scipy import stats
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from torch import nn
+
+from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
+
+SMALL = dict(
+    buffer_size=200,
+    n_fitted_iterations=2,
+    critic_steps=3,
+    actor_steps=4,
+    policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])),
+)
+
+
+class TargetActionEnv(gym.Env):
+    """Bandit-like episodes of 10 steps: obs ~ U(-1, 1)^2, reward -(a - 0.6)^2, gamma irrelevant (time limit)."""
+
+    def __init__(self, low: float = -1.0, high: float = 1.0, episode_length: int = 10):
+        self.observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.action_space = spaces.Box(low, high, (1,), np.float32)
+        self.target = low + 0.8 * (high - low)  # 0.6 in the scaled space
+        self.episode_length = episode_length
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return self.np_random.uniform(-1, 1, 2).astype(np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        scaled = 2 * (float(action[0]) - self.action_space.low[0]) / (self.action_space.high[0] - self.action_space.low[0]) - 1
+        reward = -((scaled - 0.6) ** 2)
+        truncated = self.t >= self.episode_length
+        return self.np_random.uniform(-1, 1, 2).astype(np.float32), reward, False, truncated, {}
+
+
+def make_model(env=None, **kwargs) -> DENFAC:
+    params = {**SMALL, **kwargs}
+    return DENFAC("MlpPolicy", env or gym.make("Pendulum-v1", max_episode_steps=50), seed=0, **params)
+
+
+def test_buffer_stores_behaviour_means_and_actions_in_bounds():
+    model = make_model().learn(100)
+    buffer = model.replay_buffer
+    n = buffer.size()
+    assert n == 100
+    actions, means = buffer.actions[:n, 0], buffer.behaviour_means[:n, 0]
+    assert np.all(np.abs(actions) <= 1.0)
+    assert np.all(np.isfinite(means)) and np.all(np.abs(means) <= 1.0 + 3 * model.sigma)
+    # The stored mean is the actor output for the stored observation after the update that preceded it.
+    assert not np.allclose(means, 0.0)
+
+
+def test_importance_weights_of_the_update_path_match_scipy():
+    model = make_model(n_fitted_iterations=1, weighting="retrace", sigma=0.2).learn(100)
+    actor_before = copy.deepcopy(model.actor)
+    data = model.replay_buffer.all_samples()
+    model._update()
+    weights = model._last_update_stats["weights"].squeeze(1).numpy()
+    with th.no_grad():
+        target_means = actor_before(data.observations).numpy()
+    a, mu_b = data.actions.numpy(), data.behaviour_means.numpy()
+
+    def log_density(mean):
+        mean = np.clip(mean, -1 - 3 * 0.2, 1 + 3 * 0.2)
+        lo, hi = (-1 - mean) / 0.2, (1 - mean) / 0.2
+        return stats.truncnorm.logpdf(a, lo, hi, loc=mean, scale=0.2).sum(axis=1)
+
+    expected = np.minimum(1.0, np.exp(log_density(target_means) - log_density(mu_b)))
+    np.testing.assert_allclose(weights, expected, rtol=1e-4, atol=1e-6)
+    assert weights.min() < 1.0  # the actor moved since the data was played: some samples are down-weighted
+
+    model.weighting = "none"
+    model._update()
+    assert th.all(model._last_update_stats["weights"] == 1.0)
+
+
+class IncreasingQ(nn.Module):
+    """A critic whose value always grows with the action: pushes an unbounded actor beyond the upper bound."""
+
+    def forward(self, obs, actions):
+        return 100.0 * actions.sum(dim=1, keepdim=True)
+
+    def set_training_mode(self, mode):
+        self.train(mode)
+
+
+@pytest.mark.parametrize("inverting", [True, False])
+def test_inverting_gradients_keep_actor_in_bounds(inverting):
+    model = make_model(inverting_gradients=inverting, actor_steps=300, actor_learning_rate=0.05, max_grad_norm=None)
+    model.learn(60)
+    model.critic = IncreasingQ()
+    obs = model.replay_buffer.all_samples().observations
+    model._fit_actor(obs)
+    with th.no_grad():
+        model.actor.set_training_mode(False)
+        actions = model.actor(obs)
+    if inverting:
+        assert actions.max() <= 1.05 and actions.max() > 0.9  # Adam may overshoot by a step
+    else:
+        assert actions.max() > 1.5  # without inverting gradients the linear output leaves the bounds
+
+
+def test_one_update_changes_both_networks_and_stays_finite():
+    model = make_model(reset_critic=True).learn(60)
+    actor_before = copy.deepcopy(model.actor.state_dict())
+    critic_before = copy.deepcopy(model.critic.state_dict())
+    model._update()
+    assert any(not th.equal(actor_before[k], v) for k, v in model.actor.state_dict().items())
+    assert any(not th.equal(critic_before[k], v) for k, v in model.critic.state_dict().items())
+    values = model.logger.name_to_value
+    for key in ("critic_loss", "actor_objective", "importance_weight_mean", "importance_weight_min", "q_mean", "update_time"):
+        assert np.isfinite(values[f"train/{key}"]), key
+    assert values["train/buffer_size"] == model.replay_buffer.size() and values["train/n_updates"] >= 1
+
+
+def test_timeouts_bootstrap_or_not():
+    model = make_model(gamma=0.9).learn(100)  # Pendulum: episodes of 50 steps end by time limit only
+    data = model.replay_buffer.all_samples()
+    assert data.timeouts.sum() == 2 and data.dones.sum() == 0
+    timeout = data.timeouts.squeeze(1).bool()
+    model.bootstrap_on_timeout = True
+    model._update()
+    assert not th.allclose(model._last_update_stats["q_targets"][timeout], data.rewards[timeout])
+    model.bootstrap_on_timeout = False  # paper-era authors' code: time-limit ends are terminal
+    model._update()
+    th.testing.assert_close(model._last_update_stats["q_targets"][timeout], data.rewards[timeout])
+
+
+def test_minibatch_and_box_bounds():
+    env = TargetActionEnv(low=-3.0, high=5.0)
+    model = make_model(env, batch_size=16, buffer_size=50).learn(40)
+    obs = np.stack([env.observation_space.sample() for _ in range(32)])
+    actions, _ = model.predict(obs, deterministic=True)
+    assert np.all(actions >= -3.0) and np.all(actions <= 5.0)
+    actions, _ = model.predict(obs, deterministic=False)
+    assert np.all(actions >= -3.0) and np.all(actions <= 5.0)
+
+
+def test_save_load_exact(tmp_path):
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    model = make_model(env).learn(100)
+    obs = np.stack([env.observation_space.sample() for _ in range(16)])
+    actions, _ = model.predict(obs, deterministic=True)
+    model.save(tmp_path / "denfac.zip")
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    loaded = DENFAC.load(tmp_path / "denfac.zip", env=env)
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], actions)
+    for name, value in model.policy.state_dict().items():  # includes BN running statistics
+        assert th.equal(value, loaded.policy.state_dict()[name]), name
+    assert any("running_mean" in name for name in model.policy.state_dict())
+    assert loaded.n_fitted_iterations == model.n_fitted_iterations and loaded.weighting == model.weighting
+    loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert isinstance(loaded.replay_buffer, DENFACReplayBuffer)
+    np.testing.assert_array_equal(loaded.replay_buffer.behaviour_means, model.replay_buffer.behaviour_means)
+    loaded.learn(50, reset_num_timesteps=False)
+    assert loaded.num_timesteps == 150 and loaded.replay_buffer.size() == 150
+
+
+def test_vecnormalize_callbacks_progress_bar(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make("Pendulum-v1", max_episode_steps=50)]), gamma=0.99)
+    calls = []
+
+    def callback(locals_, globals_):
+        calls.append(1)
+        return True
+
+    model = make_model(venv, tensorboard_log=str(tmp_path)).learn(100, callback=callback, progress_bar=True)
+    assert len(calls) == 100 and model._n_updates == 2
+    assert any(tmp_path.rglob("events.out.tfevents*"))
+
+
+def test_errors():
+    with pytest.raises(ValueError, match="Box"):
+        DENFAC("MlpPolicy", "CartPole-v1")
+    with pytest.raises(ValueError, match="n_envs=2"):
+        DENFAC("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=2))
+    for kwargs, name in [
+        (dict(n_fitted_iterations=0), "n_fitted_iterations"),
+        (dict(actor_steps=-1), "actor_steps"),
+        (dict(critic_steps=0), "critic_steps"),
+        (dict(sigma=0.0), "sigma"),
+        (dict(weighting="bogus"), "weighting"),
+        (dict(buffer_size=100), "max_episode_steps"),  # Pendulum episodes last 200 steps
+    ]:
+        with pytest.raises(ValueError, match=name):
+            DENFAC("MlpPolicy", "Pendulum-v1", **kwargs)
+
+
+def test_learns_target_action():
+    """The deterministic actor must move from ~0 to the rewarded action 0.6 (scaled); fails if updates are broken."""
+    env = TargetActionEnv()
+    model = DENFAC(
+        "MlpPolicy",
+        env,
+        buffer_size=200,
+        gamma=0.0,
+        sigma=0.3,
+        n_fitted_iterations=3,
+        critic_steps=20,
+        actor_steps=25,
+        critic_learning_rate=0.01,
+        actor_learning_rate=0.01,
+        policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])),
+        seed=1,
+    )
+    obs = np.stack([env.observation_space.sample() for _ in range(64)])
+    start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    model.learn(300)
+    end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    assert start > 0.4 and end < 0.15, (start, end)
