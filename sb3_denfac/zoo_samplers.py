@@ -108,3 +108,35 @@ CONVERTERS = {
     "denfac": convert_denfac_params,
     "ddpg": convert_ddpg_params,
 }
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# NFAC (on-policy, V critic, episode-wise)
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def convert_nfac_params(params: dict[str, Any]) -> dict[str, Any]:
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch")
+    hyperparams["policy_kwargs"] = _policy_kwargs(params, critic_key="vf")
+    return hyperparams
+
+
+def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """NFAC: alpha_a, alpha_c, K, critic and actor steps, reset critic, negative-delta updates, sigma, network sizes."""
+    params = {
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 0.1, log=True),
+        "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
+        "n_fitted_iterations": trial.suggest_int("n_fitted_iterations", 1, 20),
+        "critic_steps": trial.suggest_int("critic_steps", 5, 50),
+        "actor_steps": trial.suggest_int("actor_steps", 5, 50),
+        "reset_critic": trial.suggest_categorical("reset_critic", [False, True]),
+        "update_delta_neg": trial.suggest_categorical("update_delta_neg", [False, True]),
+        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
+        "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
+        "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
+    }
+    return convert_nfac_params(params)
+
+
+SAMPLERS["nfac"] = sample_nfac_params
+CONVERTERS["nfac"] = convert_nfac_params

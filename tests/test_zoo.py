@@ -1,0 +1,210 @@
+"""RL Zoo integration (sb3_denfac.zoo): training from the YAML files, Optuna studies on SQLite, config validation."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import optuna
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from sb3_denfac import zoo, zoo_samplers
+
+ENV = "sb3_denfac/ContinuousCartPole-v0"  # the cheapest of the paper's envs
+ENV_FOLDER = ENV.replace("/", "-")
+REPO = Path(__file__).resolve().parents[1]
+
+# Tiny-run overrides (-params) that only shrink the per-episode work; everything else comes from the YAML entry.
+CHEAP_PARAMS = {
+    "denfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
+    "ddpg": ["gradient_steps:1"],
+    "nfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
+    "cacla": [],
+    "cmaes": [],
+    "td3": ["learning_starts:100"],
+}
+OPTIMIZE_ALGO = "nfac"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered() -> None:
+    zoo.register()
+
+
+def _scalar_tags(tb_dir: Path) -> set[str]:
+    tags: set[str] = set()
+    for event_file in tb_dir.rglob("events.out.tfevents.*"):
+        accumulator = EventAccumulator(str(event_file))
+        accumulator.Reload()
+        tags |= set(accumulator.Tags()["scalars"])
+    return tags
+
+
+@pytest.mark.parametrize("algo", list(CHEAP_PARAMS))
+def test_zoo_trains_from_yaml(algo: str, tmp_path: Path) -> None:
+    logs, tb = tmp_path / "logs", tmp_path / "tb"
+    argv = ["train", "--algo", algo, "--env", ENV, "-n", "300", "-f", str(logs), "-tb", str(tb), "--seed", "0"]
+    argv += ["--eval-freq", "-1", "--verbose", "0"]
+    if CHEAP_PARAMS[algo]:
+        argv += ["-params", *CHEAP_PARAMS[algo]]
+    zoo.main(argv)
+
+    run_dir = logs / algo / f"{ENV_FOLDER}_1"
+    model_path = run_dir / f"{ENV_FOLDER}.zip"
+    assert model_path.is_file()
+    # The zoo recorded the hyperparameters it read from this package's YAML file.
+    assert "n_timesteps" in (run_dir / ENV_FOLDER / "config.yml").read_text()
+    model = zoo.algorithm_class(algo).load(model_path, env=gym.make(ENV), device="cpu")
+    assert model.num_timesteps >= 300
+    tags = _scalar_tags(tb / ENV_FOLDER)
+    assert any(tag.startswith("train/") for tag in tags), tags  # the algorithm's internals
+    assert any(tag.startswith("rollout/") for tag in tags), tags  # return curves
+
+
+def test_enjoy_runs_a_trained_agent(tmp_path: Path) -> None:
+    """The zoo's enjoy script loads the saved agent without an env (as SB3 ``load(path)``) and plays it."""
+    logs = tmp_path / "logs"
+    common = ["--algo", "denfac", "--env", ENV, "-f", str(logs), "--seed", "0", "--verbose", "0"]
+    zoo.main(["train", *common, "-n", "100", "--eval-freq", "-1", "-params", *CHEAP_PARAMS["denfac"]])
+    zoo.main(["enjoy", *common, "-n", "50", "--no-render", "--deterministic"])
+
+
+def _study(logs: Path, algo: str) -> optuna.Study:
+    return optuna.load_study(study_name=f"{algo}-{ENV_FOLDER}", storage=f"sqlite:///{logs / 'optuna.db'}")
+
+
+def test_optimize_on_sqlite_resumes_the_study(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    argv = ["train", "--algo", OPTIMIZE_ALGO, "--env", ENV, "-n", "200", "-f", str(logs), "-optimize"]
+    argv += ["--n-evaluations", "1", "--eval-episodes", "1", "--sampler", "random", "--pruner", "none"]
+    argv += ["--no-optim-plots", "--verbose", "0"]
+    zoo.main([*argv, "--n-trials", "2", "--seed", "1"])
+    first = _study(logs, OPTIMIZE_ALGO).trials
+    assert len(first) == 2
+    assert all(t.state == optuna.trial.TrialState.COMPLETE for t in first)
+
+    zoo.main([*argv, "--n-trials", "1", "--seed", "2"])
+    trials = _study(logs, OPTIMIZE_ALGO).trials
+    assert len(trials) == 3
+    assert [t.params for t in trials[:2]] == [t.params for t in first]
+
+
+@pytest.mark.parametrize("algo", sorted(zoo_samplers.SAMPLERS))
+def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
+    """Every sampler's output (merged into the YAML entry, as the zoo does) passes validation; converter == sampler."""
+    entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path(algo)), ENV)
+    zoo_samplers.SAMPLER_CONTEXT["policy_kwargs"] = dict(entry.get("policy_kwargs", {}))
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
+    for _ in range(5):
+        trial = study.ask()
+        sampled = zoo_samplers.SAMPLERS[algo](trial, 1, 1, {})
+        assert "train_freq" not in sampled
+        zoo.validate_entry(algo, {**entry, **sampled})
+        assert zoo_samplers.CONVERTERS[algo](trial.params) == sampled
+
+
+@pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)
+def test_every_yaml_entry_validates(path: Path) -> None:
+    config = zoo.validate_config_file(path, path.stem)
+    for env_id in zoo.PACKAGE_ENV_IDS:
+        assert env_id in config, f"{path.name} has no entry for {env_id}"
+
+
+def test_paper_figure5_values() -> None:
+    denfac = zoo.load_config_file(zoo.default_config_path("denfac"))
+    acrobot, cartpole = denfac["sb3_denfac/ContinuousAcrobot-v0"], denfac["sb3_denfac/ContinuousCartPole-v0"]
+    assert (acrobot["buffer_size"], acrobot["reset_critic"], acrobot["inverting_gradients"], acrobot["gamma"]) == (
+        6000,
+        True,
+        False,
+        0.9,
+    )
+    assert (cartpole["buffer_size"], cartpole["reset_critic"], cartpole["inverting_gradients"]) == (3000, False, True)
+    assert (cartpole["n_fitted_iterations"], cartpole["actor_steps"], cartpole["actor_learning_rate"]) == (10, 25, 0.1)
+    ddpg = zoo.load_config_file(zoo.default_config_path("ddpg"))["sb3_denfac/ContinuousCartPole-v0"]
+    assert (ddpg["batch_size"], ddpg["tau"], ddpg["gradient_steps"]) == (64, 0.1, 8)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Bad configurations fail before training, with the culprit named
+# ---------------------------------------------------------------------------------------------------------------------
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "bad.yml"
+    path.write_text(text)
+    return path
+
+
+def _train_error(tmp_path: Path, conf: Path, *extra: str, algo: str = "denfac") -> str:
+    logs = tmp_path / "logs"
+    with pytest.raises(SystemExit) as excinfo:
+        zoo.main(["train", "--algo", algo, "--env", ENV, "-f", str(logs), "--conf-file", str(conf), *extra])
+    assert not logs.exists(), "the error must come before the zoo creates anything"
+    return str(excinfo.value.code)
+
+
+GOOD_ENTRY = f"""{ENV}:
+  n_timesteps: 1000
+  policy: 'MlpPolicy'
+"""
+
+
+def test_unknown_key_names_key_and_algorithm(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  n_fitted_iteration: 3\n"))
+    assert "n_fitted_iteration" in message and "denfac" in message and "n_fitted_iterations" in message
+
+
+def test_unknown_policy_kwargs_key(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  policy_kwargs:\n    net_arc: [5]\n"))
+    assert "net_arc" in message and "policy_kwargs" in message
+
+
+def test_wrong_type_explains_yaml_float(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  critic_learning_rate: 1e-3\n"))
+    assert "critic_learning_rate" in message and "!!float" in message
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  reset_critic: 'yes'\n"))
+    assert "reset_critic" in message and "bool" in message
+
+
+def test_wrong_type_from_command_line_override(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY), "-params", "buffer_size:3000.5")
+    assert "buffer_size" in message and "int" in message
+
+
+def test_unknown_env_id_in_yaml_lists_known_ids(tmp_path: Path) -> None:
+    text = GOOD_ENTRY + GOOD_ENTRY.replace(ENV, "sb3_denfac/ContinuousCartpole-v0")
+    message = _train_error(tmp_path, _write(tmp_path, text))
+    assert "sb3_denfac/ContinuousCartpole-v0" in message
+    assert all(env_id in message for env_id in zoo.PACKAGE_ENV_IDS)
+
+
+def test_unknown_env_on_command_line(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit) as excinfo:
+        zoo.main(["train", "--algo", "denfac", "--env", "sb3_denfac/NoSuchEnv-v0", "-f", str(tmp_path / "logs")])
+    assert "sb3_denfac/NoSuchEnv-v0" in str(excinfo.value.code)
+    assert zoo.PACKAGE_ENV_IDS[0] in str(excinfo.value.code)
+
+
+def test_malformed_yaml_names_file_and_line(tmp_path: Path) -> None:
+    conf = _write(tmp_path, GOOD_ENTRY + "  gamma: [0.9\n  sigma: 0.05\n")
+    message = _train_error(tmp_path, conf)
+    assert str(conf) in message and "line" in message
+
+
+def test_cli_reports_config_errors_without_traceback(tmp_path: Path) -> None:
+    conf = _write(tmp_path, GOOD_ENTRY + "  typo_key: 1\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "sb3_denfac.zoo", "train", "--algo", "denfac", "--env", ENV, "--conf-file", str(conf)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"},
+        timeout=120,
+    )
+    assert result.returncode != 0
+    assert "typo_key" in result.stderr and "Traceback" not in result.stderr
