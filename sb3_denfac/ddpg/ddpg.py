@@ -1,0 +1,237 @@
+"""DDPG as compared against in the paper: batch norm, truncated-Gaussian exploration, optional inverting gradients."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.noise import ActionNoise
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.utils import FloatSchedule, polyak_update, update_learning_rate
+from stable_baselines3.ddpg import DDPG as SB3DDPG
+from torch.nn import functional as F
+
+from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
+from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
+from sb3_denfac.common.networks import set_bn_training_mode
+from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
+
+
+def _check_learning_rate(name: str, value: float | Schedule | None) -> None:
+    if value is None or callable(value):
+        return
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive number or a schedule, got {value!r}")
+
+
+class DDPG(TruncatedGaussianExplorationMixin, SB3DDPG):
+    """Deep Deterministic Policy Gradient (Lillicrap et al. 2016) in the configuration the DENFAC paper compares with.
+
+    Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4, Figure 5: DDPG with
+    batch normalization in actor and critic, leaky-ReLU networks (critic 50-7), N(0, 0.01^2) initial weights, the
+    truncated Gaussian exploration N(mu(s), sigma^2) on [-1, 1] with sigma = 0.05 used by every algorithm of the paper,
+    a tuned number of "additional updates" (``gradient_steps`` per environment step) and, "when it was better", the
+    inverting-gradient strategy of Hausknecht & Stone (2016) with an unbounded (linear) actor instead of a tanh.
+
+    With ``inverting_gradients=True`` the actor update back-propagates dQ/da scaled by the distance to the bound it
+    pushes toward (sign reversed beyond it, :mod:`sb3_denfac.common.inverting_gradients`), which pulls out-of-bound
+    outputs back; targets and executed actions use the actor output clamped to [-1, 1].
+
+    Differences from SB3's DDPG: networks and exploration above; separate actor and critic learning rates (alpha_a,
+    alpha_c); with ``batch_norm=False``, ``init="default"``, ``activation_fn=nn.ReLU``, a tanh actor and ``sigma=None`` it
+    performs SB3's DDPG updates exactly (tested). As in SB3/TD3, batch-norm running statistics are copied to the target
+    networks after every update. Unlike SB3's TD3/DDPG, the actor loss evaluates the critic with its batch-norm running
+    statistics (eval mode): in training mode, BN on the critic's action input removes the batch-mean part of dQ/da, so
+    the actor could not shift all its actions together (observed: it does not learn a constant best action).
+
+    :param policy: policy class or "MlpPolicy" (:class:`sb3_denfac.ddpg.policies.DDPGPolicy`; policy_kwargs:
+        ``net_arch=dict(pi=[...], qf=[50, 7])``, ``batch_norm``, ``init``, ``activation_fn``, ``tanh_output``)
+    :param env: environment (Box action space) or its registered id
+    :param learning_rate: critic learning rate alpha_c (also the actor's unless ``actor_learning_rate`` is given);
+        float or schedule of the remaining progress
+    :param actor_learning_rate: actor learning rate alpha_a (None: same as ``learning_rate``)
+    :param buffer_size: replay buffer size (FIFO)
+    :param learning_starts: environment steps with uniform random actions before learning starts (the paper has none)
+    :param batch_size: minibatch size (paper: 64); must be >= 2 with batch norm
+    :param tau: soft target update coefficient (paper: 0.001 Acrobot / Half-Cheetah, 0.1 Cartpole)
+    :param gamma: discount factor
+    :param train_freq: update every ``train_freq`` steps, or ``(n, "episode")``
+    :param gradient_steps: gradient steps per rollout, the paper's "additional updates" (Figure 5: 8); -1 = as many as
+        environment steps collected
+    :param sigma: std of the truncated Gaussian exploration in the scaled [-1, 1] action space (paper: 0.05);
+        None switches it off and uses SB3's ``action_noise`` (additive, clipped) instead
+    :param inverting_gradients: use inverting gradients for the actor update; requires the unbounded actor
+        (``tanh_output=False``, set automatically)
+    :param action_noise: SB3 action noise; only allowed with ``sigma=None``
+    :param replay_buffer_class: replay buffer class (default SB3's ReplayBuffer)
+    :param replay_buffer_kwargs: its keyword arguments
+    :param optimize_memory_usage: memory-efficient replay buffer variant
+    :param n_steps: n-step returns (SB3's NStepReplayBuffer)
+    :param tensorboard_log: TensorBoard log directory (logs train/actor_loss, train/critic_loss, train/q_value,
+        train/actor_out_of_bounds, train/actor_learning_rate, train/learning_rate)
+    :param policy_kwargs: keyword arguments of the policy
+    :param verbose: verbosity level
+    :param seed: random seed
+    :param device: torch device
+    :param _init_setup_model: build the networks at construction
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}  # type: ignore[assignment]
+    policy: DDPGPolicy
+
+    def __init__(
+        self,
+        policy: str | type[DDPGPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 1e-3,
+        actor_learning_rate: float | Schedule | None = None,
+        buffer_size: int = 1_000_000,
+        learning_starts: int = 100,
+        batch_size: int = 64,
+        tau: float = 0.005,
+        gamma: float = 0.99,
+        train_freq: int | tuple[int, str] = 1,
+        gradient_steps: int = 1,
+        sigma: float | None = 0.05,
+        inverting_gradients: bool = False,
+        action_noise: ActionNoise | None = None,
+        replay_buffer_class: type[ReplayBuffer] | None = None,
+        replay_buffer_kwargs: dict[str, Any] | None = None,
+        optimize_memory_usage: bool = False,
+        n_steps: int = 1,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ):
+        super().__init__(
+            policy=policy,
+            env=env,
+            learning_rate=learning_rate,
+            buffer_size=buffer_size,
+            learning_starts=learning_starts,
+            batch_size=batch_size,
+            tau=tau,
+            gamma=gamma,
+            train_freq=train_freq,
+            gradient_steps=gradient_steps,
+            action_noise=action_noise,
+            replay_buffer_class=replay_buffer_class,
+            replay_buffer_kwargs=replay_buffer_kwargs,
+            optimize_memory_usage=optimize_memory_usage,
+            n_steps=n_steps,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=dict(policy_kwargs or {}),  # copied: we add tanh_output below
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        self.sigma = check_exploration_sigma(sigma)
+        self.actor_learning_rate = actor_learning_rate
+        self.inverting_gradients = bool(inverting_gradients)
+        if self.sigma is not None and action_noise is not None:
+            raise ValueError("action_noise is only used with sigma=None (sigma > 0 selects truncated Gaussian exploration)")
+        _check_learning_rate("learning_rate", learning_rate)
+        _check_learning_rate("actor_learning_rate", actor_learning_rate)
+        if not 0.0 < tau <= 1.0:
+            raise ValueError(f"tau must be in (0, 1], got {tau}")
+        if not 0.0 <= gamma <= 1.0:
+            raise ValueError(f"gamma must be in [0, 1], got {gamma}")
+        if batch_size < 1 or (batch_size < 2 and self.policy_kwargs.get("batch_norm", True)):
+            raise ValueError(f"batch_size must be >= 2 with batch norm (>= 1 without), got {batch_size}")
+        if gradient_steps == 0 or gradient_steps < -1:
+            raise ValueError(f"gradient_steps must be a positive integer or -1, got {gradient_steps}")
+        if issubclass(self.policy_class, DDPGPolicy):
+            tanh_output = self.policy_kwargs.setdefault("tanh_output", not self.inverting_gradients)
+            if self.inverting_gradients and tanh_output:
+                raise ValueError("inverting_gradients=True needs an unbounded actor: do not set tanh_output=True")
+        elif self.inverting_gradients:
+            raise ValueError("inverting_gradients=True needs a DDPGPolicy (unbounded actor)")
+        if _init_setup_model:
+            self._setup_model()
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        rate = self.learning_rate if self.actor_learning_rate is None else self.actor_learning_rate
+        self.actor_lr_schedule = FloatSchedule(rate)
+
+    def _exploration_mean(self, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        # Raw actor output (an unbounded actor's mean may lie outside [-1, 1]; the sampler clamps it at 3 sigma).
+        self.policy.set_training_mode(False)
+        obs_tensor, _ = self.policy.obs_to_tensor(observation)
+        with th.no_grad():
+            mean = self.actor(obs_tensor)
+        return mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
+
+    def train(self, gradient_steps: int, batch_size: int = 64) -> None:
+        self.policy.set_training_mode(True)
+        critic_lr = self.lr_schedule(self._current_progress_remaining)
+        actor_lr = self.actor_lr_schedule(self._current_progress_remaining)
+        update_learning_rate(self.critic.optimizer, critic_lr)
+        update_learning_rate(self.actor.optimizer, actor_lr)
+        low = th.tensor(-1.0, device=self.device)
+        high = th.tensor(1.0, device=self.device)
+
+        actor_losses, critic_losses, q_values, out_of_bounds = [], [], [], []
+        for _ in range(gradient_steps):
+            self._n_updates += 1
+            replay_data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
+            discounts = replay_data.discounts if replay_data.discounts is not None else self.gamma
+
+            with th.no_grad():
+                # Executed actions are clamped, so the target uses the clamped target-actor output.
+                next_actions = self.actor_target(replay_data.next_observations).clamp(-1.0, 1.0)
+                next_q = th.cat(self.critic_target(replay_data.next_observations, next_actions), dim=1)
+                next_q, _ = th.min(next_q, dim=1, keepdim=True)
+                target_q = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q
+
+            current_q = self.critic(replay_data.observations, replay_data.actions)
+            critic_loss = sum(F.mse_loss(q, target_q) for q in current_q)
+            assert isinstance(critic_loss, th.Tensor)
+            critic_losses.append(critic_loss.item())
+            self.critic.optimizer.zero_grad()
+            critic_loss.backward()
+            self.critic.optimizer.step()
+
+            # Actor: ascend Q(s, mu(s)); the critic's gradients are zeroed before its next step. The critic's batch
+            # norm uses its running statistics here: with batch statistics, BN on the action input would cancel the
+            # batch-mean component of dQ/da (the actor's bias would get no gradient) and policy actions would leak
+            # into the running statistics.
+            actions_pi = self.actor(replay_data.observations)
+            set_bn_training_mode(self.critic, False)
+            q_pi = self.critic.q1_forward(replay_data.observations, actions_pi)
+            set_bn_training_mode(self.critic, True)
+            self.actor.optimizer.zero_grad()
+            if self.inverting_gradients:
+                actor_loss = -inverting_gradient_actor_backward(q_pi, actions_pi, low, high)
+            else:
+                actor_loss = -q_pi.mean()
+                actor_loss.backward()
+            self.actor.optimizer.step()
+            actor_losses.append(actor_loss.item())
+            q_values.append(q_pi.mean().item())
+            out_of_bounds.append((actions_pi.detach().abs() > 1.0).float().mean().item())
+
+            polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+            polyak_update(self.actor.parameters(), self.actor_target.parameters(), self.tau)
+            # Batch-norm running statistics are copied, not averaged (SB3 GH#996).
+            polyak_update(self.critic_batch_norm_stats, self.critic_batch_norm_stats_target, 1.0)
+            polyak_update(self.actor_batch_norm_stats, self.actor_batch_norm_stats_target, 1.0)
+
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/learning_rate", critic_lr)
+        self.logger.record("train/actor_learning_rate", actor_lr)
+        if critic_losses:
+            self.logger.record("train/critic_loss", float(np.mean(critic_losses)))
+            self.logger.record("train/actor_loss", float(np.mean(actor_losses)))
+            self.logger.record("train/q_value", float(np.mean(q_values)))
+            self.logger.record("train/actor_out_of_bounds", float(np.mean(out_of_bounds)))
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "actor_lr_schedule"]
