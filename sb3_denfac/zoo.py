@@ -251,6 +251,12 @@ def validate_entry(algo: str, entry: dict[str, Any], source: str = "") -> None:
         raise ZooConfigError(f"{algo}{where}: missing 'n_timesteps' (the zoo's training budget in env steps)")
     if "policy" not in entry:
         raise ZooConfigError(f"{algo}{where}: missing 'policy' (e.g. policy: 'MlpPolicy')")
+    policy = entry["policy"]
+    if isinstance(policy, str) and "." not in policy and policy not in cls.policy_aliases:
+        raise ZooConfigError(
+            f"Unknown policy {policy!r} for algorithm {algo!r}{where}; available: {', '.join(cls.policy_aliases)} "
+            "(or a full class path such as my_package.MyPolicy)"
+        )
     for key, value in entry.items():
         if key in ZOO_CLI_ARGS:
             raise ZooConfigError(f"{algo}{where}: {key!r} is set on the command line ({ZOO_CLI_ARGS[key]}), not in the YAML")

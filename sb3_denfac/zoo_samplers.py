@@ -100,16 +100,6 @@ def sample_ddpg_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
     return convert_ddpg_params(params)
 
 
-SAMPLERS = {
-    "denfac": sample_denfac_params,
-    "ddpg": sample_ddpg_params,
-}
-CONVERTERS = {
-    "denfac": convert_denfac_params,
-    "ddpg": convert_ddpg_params,
-}
-
-
 # --------------------------------------------------------------------------------------------------------------------
 # NFAC (on-policy, V critic, episode-wise)
 # --------------------------------------------------------------------------------------------------------------------
@@ -138,5 +128,14 @@ def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
     return convert_nfac_params(params)
 
 
-SAMPLERS["nfac"] = sample_nfac_params
-CONVERTERS["nfac"] = convert_nfac_params
+#: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.register`.
+SAMPLERS = {
+    "denfac": sample_denfac_params,
+    "ddpg": sample_ddpg_params,
+    "nfac": sample_nfac_params,
+}
+CONVERTERS = {
+    "denfac": convert_denfac_params,
+    "ddpg": convert_ddpg_params,
+    "nfac": convert_nfac_params,
+}

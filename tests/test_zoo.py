@@ -159,6 +159,11 @@ def test_unknown_key_names_key_and_algorithm(tmp_path: Path) -> None:
     assert "n_fitted_iteration" in message and "denfac" in message and "n_fitted_iterations" in message
 
 
+def test_unknown_policy_name(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY.replace("MlpPolicy", "MLPPolicy")))
+    assert "MLPPolicy" in message and "MlpPolicy" in message
+
+
 def test_unknown_policy_kwargs_key(tmp_path: Path) -> None:
     message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  policy_kwargs:\n    net_arc: [5]\n"))
     assert "net_arc" in message and "policy_kwargs" in message
