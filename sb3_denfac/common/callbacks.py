@@ -1,0 +1,124 @@
+"""Callbacks for measuring data-efficiency the way the paper does (best registered performance per episode)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+
+class EpisodePerformanceCallback(BaseCallback):
+    """
+    Record every finished training episode and optionally stop training after ``max_episodes`` episodes.
+
+    The paper (Section 4, Figure 3) measures data-efficiency as the *best registered performance* since the start of
+    learning, plotted against the number of episodes. The paper's environments put their per-episode measure in the
+    last step's ``info["paper_performance"]`` (Acrobot: steps to reach the goal, lower is better; CartPole and
+    Half-Cheetah: episode return). For each finished episode this callback stores one record::
+
+        {"episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time"}
+
+    ``return``/``length`` come from the ``Monitor`` wrapper's ``info["episode"]`` when present (unnormalised, even under
+    ``VecNormalize``), else from the rewards seen by the callback. ``timesteps`` is the model's step counter at the end
+    of the episode and ``wall_time`` the seconds since the first ``learn()`` started. With several envs, episodes are
+    numbered in the order they finish. It also logs ``rollout/paper_performance`` and ``rollout/best_paper_performance``.
+
+    :param max_episodes: stop training once this many episodes have finished (``None``: never stop).
+        Note that an off-policy algorithm stopped this way does not run the update that would follow the last episode.
+    :param performance_key: info key holding the per-episode measure.
+    :param lower_is_better: whether a lower measure is better (Acrobot), for the running best.
+    :param fallback_to_return: if the info has no ``performance_key``, use the episode return instead of NaN
+        (lets the callback run on any Gymnasium env).
+    :param verbose: verbosity level: 0 silent, 1 prints one line per episode.
+    """
+
+    def __init__(
+        self,
+        max_episodes: int | None = None,
+        performance_key: str = "paper_performance",
+        lower_is_better: bool = False,
+        fallback_to_return: bool = True,
+        verbose: int = 0,
+    ):
+        super().__init__(verbose=verbose)
+        if max_episodes is not None and max_episodes < 1:
+            raise ValueError(f"max_episodes must be None or >= 1, got {max_episodes}")
+        self.max_episodes = max_episodes
+        self.performance_key = performance_key
+        self.lower_is_better = lower_is_better
+        self.fallback_to_return = fallback_to_return
+        self.records: list[dict[str, Any]] = []
+        self._start_time = 0.0
+        self._returns = np.zeros(0)
+        self._lengths = np.zeros(0, dtype=np.int64)
+
+    @property
+    def best_so_far(self) -> float:
+        """Best performance registered so far (NaN before the first episode)."""
+        return self.records[-1]["best_so_far"] if self.records else float("nan")
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.records)
+
+    def performances(self) -> np.ndarray:
+        """Per-episode measures, in episode order."""
+        return np.array([r["performance"] for r in self.records], dtype=np.float64)
+
+    def _on_training_start(self) -> None:
+        if not self.records:  # keep the clock and the episode count across successive learn() calls
+            self._start_time = time.perf_counter()
+        n_envs = self.training_env.num_envs
+        self._returns = np.zeros(n_envs)
+        self._lengths = np.zeros(n_envs, dtype=np.int64)
+
+    def _on_step(self) -> bool:
+        for key in ("dones", "infos"):
+            if key not in self.locals:
+                raise RuntimeError(f"`{key}` is not defined in the locals passed to callback.on_step() by {type(self.model)}")
+        dones = np.asarray(self.locals["dones"]).reshape(-1)
+        infos = self.locals["infos"]
+        rewards = self.locals.get("rewards")
+        if rewards is not None:
+            self._returns += np.asarray(rewards, dtype=np.float64).reshape(-1)
+        self._lengths += 1
+        for env_idx in np.flatnonzero(dones):
+            self._record_episode(infos[env_idx], int(env_idx))
+        return self.max_episodes is None or len(self.records) < self.max_episodes
+
+    def _record_episode(self, info: dict[str, Any], env_idx: int) -> None:
+        monitor = info.get("episode")
+        ep_return = float(monitor["r"]) if monitor is not None else float(self._returns[env_idx])
+        ep_length = int(monitor["l"]) if monitor is not None else int(self._lengths[env_idx])
+        self._returns[env_idx] = 0.0
+        self._lengths[env_idx] = 0
+        if self.performance_key in info:
+            performance = float(info[self.performance_key])
+        else:
+            performance = ep_return if self.fallback_to_return else float("nan")
+        previous = self.best_so_far
+        if np.isnan(previous):
+            best = performance
+        elif np.isnan(performance):
+            best = previous
+        else:
+            best = min(previous, performance) if self.lower_is_better else max(previous, performance)
+        record = {
+            "episode": len(self.records) + 1,
+            "performance": performance,
+            "best_so_far": best,
+            "return": ep_return,
+            "length": ep_length,
+            "timesteps": int(self.num_timesteps),
+            "wall_time": time.perf_counter() - self._start_time,
+        }
+        self.records.append(record)
+        self.logger.record("rollout/paper_performance", performance)
+        self.logger.record("rollout/best_paper_performance", best)
+        if self.verbose >= 1:
+            print(
+                f"episode {record['episode']}: performance={performance:.4g} best={best:.4g} "
+                f"return={ep_return:.4g} length={ep_length} timesteps={record['timesteps']}"
+            )
