@@ -265,6 +265,8 @@ def validate_entry(algo: str, entry: dict[str, Any], source: str = "") -> None:
                 raise ZooConfigError(f"{algo}{where}: n_timesteps must be a positive number, got {value!r}")
             if key == "n_envs" and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise ZooConfigError(f"{algo}{where}: n_envs must be a positive integer, got {value!r}")
+            if key == "monitor_kwargs":
+                _validate_monitor_kwargs(algo, value, where)
             continue
         if key not in params and not accepts_any:
             close = difflib.get_close_matches(key, [*params, *ZOO_KEYS], n=1)
@@ -314,6 +316,18 @@ def _eval_like_zoo(algo: str, key: str, value: str, where: str) -> Any:
         raise ZooConfigError(
             f"{algo}{where}: cannot evaluate {key}: {value!r} ({type(e).__name__}: {e}). Prefer plain YAML mappings."
         ) from e
+
+
+def _validate_monitor_kwargs(algo: str, value: Any, where: str) -> None:
+    monitor_kwargs = _eval_like_zoo(algo, "monitor_kwargs", value, where) if isinstance(value, str) else value
+    if not isinstance(monitor_kwargs, dict):
+        raise ZooConfigError(f"{algo}{where}: monitor_kwargs must be a mapping, got {value!r}")
+    keywords = monitor_kwargs.get("info_keywords", ())
+    if not isinstance(keywords, tuple):
+        raise ZooConfigError(
+            f"{algo}{where}: monitor_kwargs info_keywords must be a tuple (SB3's Monitor concatenates tuples), got "
+            f"{keywords!r}; YAML has no tuples: write monitor_kwargs: \"dict(info_keywords=('paper_performance',))\""
+        )
 
 
 def _validate_policy_kwargs(algo: str, cls: type, policy: Any, policy_kwargs: dict[str, Any], where: str) -> None:

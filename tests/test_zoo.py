@@ -58,6 +58,8 @@ def test_zoo_trains_from_yaml(algo: str, tmp_path: Path) -> None:
     assert model_path.is_file()
     # The zoo recorded the hyperparameters it read from this package's YAML file.
     assert "n_timesteps" in (run_dir / ENV_FOLDER / "config.yml").read_text()
+    # Monitor records the paper's per-episode measure next to the return (monitor_kwargs of the YAML entry).
+    assert (run_dir / "0.monitor.csv").read_text().splitlines()[1] == "r,l,t,paper_performance"
     model = zoo.algorithm_class(algo).load(model_path, env=gym.make(ENV), device="cpu")
     assert model.num_timesteps >= 300
     tags = _scalar_tags(tb / ENV_FOLDER)
@@ -157,6 +159,11 @@ GOOD_ENTRY = f"""{ENV}:
 def test_unknown_key_names_key_and_algorithm(tmp_path: Path) -> None:
     message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  n_fitted_iteration: 3\n"))
     assert "n_fitted_iteration" in message and "denfac" in message and "n_fitted_iterations" in message
+
+
+def test_monitor_info_keywords_must_be_a_tuple(tmp_path: Path) -> None:
+    message = _train_error(tmp_path, _write(tmp_path, GOOD_ENTRY + "  monitor_kwargs: {info_keywords: [x]}\n"))
+    assert "info_keywords" in message and "tuple" in message
 
 
 def test_unknown_policy_name(tmp_path: Path) -> None:
