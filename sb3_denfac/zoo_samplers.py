@@ -128,14 +128,42 @@ def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
     return convert_nfac_params(params)
 
 
+# --------------------------------------------------------------------------------------------------------------------
+# CMA-ES (actor-only)
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def convert_cmaes_params(params: dict[str, Any]) -> dict[str, Any]:
+    hyperparams = _copy_except(params, "actor_arch")
+    policy_kwargs = dict(SAMPLER_CONTEXT.get("policy_kwargs") or {})
+    if "actor_arch" in params:
+        policy_kwargs["net_arch"] = list(ACTOR_ARCHS[params["actor_arch"]])  # one network: a plain list
+    hyperparams["policy_kwargs"] = policy_kwargs
+    return hyperparams
+
+
+def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """CMA-ES: population size, initial step size, episodes per candidate, action noise sigma, actor size."""
+    params = {
+        "population_size": trial.suggest_categorical("population_size", [None, 8, 16, 32]),  # None: cma's default
+        "sigma0": trial.suggest_float("sigma0", 0.01, 2.0, log=True),
+        "n_eval_episodes": trial.suggest_int("n_eval_episodes", 1, 5),
+        "sigma": trial.suggest_float("sigma", 0.0, 0.3),
+        "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
+    }
+    return convert_cmaes_params(params)
+
+
 #: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.register`.
 SAMPLERS = {
     "denfac": sample_denfac_params,
     "ddpg": sample_ddpg_params,
     "nfac": sample_nfac_params,
+    "cmaes": sample_cmaes_params,
 }
 CONVERTERS = {
     "denfac": convert_denfac_params,
     "ddpg": convert_ddpg_params,
     "nfac": convert_nfac_params,
+    "cmaes": convert_cmaes_params,
 }
