@@ -20,7 +20,8 @@ Stable API (other algorithms rely on it):
   the env's [low, high], ``buffer_action`` in the scaled [-1, 1] space.
 - ``self._last_behaviour_mean``: np.ndarray (n_envs, action_dim), float32, the behaviour mean mu_b(s) of the last sample
   in the scaled space, as output by the actor (not clamped: clamp with ``truncated_normal.clamp_mean`` or let
-  ``truncated_normal_log_prob`` do it). Rows are NaN for uniform warm-up actions (see below).
+  ``truncated_normal_log_prob`` do it). Rows are NaN for uniform warm-up actions (see below). Not updated when
+  ``sigma is None`` (SB3's own exploration).
 - ``_exploration_mean(obs) -> np.ndarray``: the deterministic actor output in the scaled space, unclipped; the default
   uses ``self.policy._predict(obs, deterministic=True)``, which is right for SB3's TD3/DDPG/SAC actors and for
   unbounded (inverting-gradient) actors. Override it if your policy's ``_predict`` does something else.
