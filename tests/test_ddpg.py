@@ -80,6 +80,10 @@ def test_truncated_gaussian_exploration_and_inverting_gradients_stay_in_bounds()
     # Behaviour densities are finite (means clamped at 3 sigma by the truncated Gaussian).
     logp = behaviour_log_prob(th.as_tensor(buffer_actions), th.as_tensor(means), model.sigma)
     assert th.isfinite(logp).all()
+    assert th.allclose(logp[:10], th.full((10,), -float(np.log(2.0))))  # uniform warm-up density on [-1, 1]
+    # Explored actions stay within a few sigma of the (clamped) behaviour mean.
+    clamped = np.clip(means[10:], -1.0 - 3 * model.sigma, 1.0 + 3 * model.sigma)
+    assert np.all(np.abs(buffer_actions[10:] - clamped) < 10 * model.sigma)
     obs = np.random.default_rng(0).uniform(-1, 1, (32, 3)).astype(np.float32)
     assert np.all(np.abs(model.predict(obs, deterministic=True)[0]) <= 2.0)
 
