@@ -306,6 +306,7 @@ class DeterministicOnPolicyAlgorithm(OnPolicyAlgorithm):
             **self.policy_kwargs,
         )
         self.policy = self.policy.to(self.device)
+        self.policy.set_training_mode(False)  # BN in train mode only inside the gradient steps
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.actor_optimizer", "policy.critic_optimizer"], []
