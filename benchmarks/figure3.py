@@ -1,6 +1,6 @@
 """Figure 3 data-efficiency benchmark: algorithms x envs x seeds, each for a budget of EPISODES.
 
-Every run trains ``ALGO("MlpPolicy", env, **hyperparams)`` with the hyperparameters of ``hyperparams/<algo>.yml``
+Every run trains ``ALGO("MlpPolicy", env, **hyperparams)`` with the hyperparameters of ``sb3_denfac/hyperparams/<algo>.yml``
 (RL Zoo conventions, keyed by env id, ``default:`` fallback; algorithm defaults when missing, recorded in the results)
 and stops after ``--episodes`` episodes. Each finished episode's ``info["paper_performance"]`` is recorded by
 ``sb3_denfac.common.callbacks.EpisodePerformanceCallback``. One run writes, at its end and atomically,
@@ -53,7 +53,7 @@ DEFAULT_ENVS = ["acrobot", "cartpole", "halfcheetah"]
 # Used only when hyperparams/<algo>.yml has no entry for the env (recorded as "benchmark fallback" in the results):
 # the env's paper gamma, plus exploration noise for TD3, whose SB3 default explores with no noise at all.
 FALLBACK_HYPERPARAMS: dict[str, dict[str, Any]] = {"td3": {"noise_type": "normal", "noise_std": 0.1}}
-DEFAULT_HYPERPARAMS_DIR = _REPO / "hyperparams"
+DEFAULT_HYPERPARAMS_DIR = _REPO / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
 DEFAULT_RESULTS_DIR = _HERE / "results" / "figure3"
 
 
@@ -273,7 +273,7 @@ def sweep(
     algos: Sequence[str],
     envs: Sequence[str],
     seeds: Sequence[int],
-    episodes: int,
+    episodes: int | dict[str, int],
     results_dir: str | Path = DEFAULT_RESULTS_DIR,
     hyperparams_dir: str | Path = DEFAULT_HYPERPARAMS_DIR,
     workers: int = 1,
@@ -282,24 +282,30 @@ def sweep(
     analysis: bool = True,
     verbose: int = 1,
 ) -> dict[str, list]:
-    """Run the missing (algo, env, seed) runs; return ``{"done", "skipped", "failed"}`` task lists."""
+    """Run the missing (algo, env, seed) runs; return ``{"done", "skipped", "failed"}`` task lists.
+
+    ``episodes`` is one budget for all envs or ``{env: budget}``. Runs are ordered seed by seed, so a sweep stopped
+    early has every (algo, env) at the first seeds.
+    """
     unknown = [a for a in algos if a not in ALGOS]
     if unknown:
         raise ValueError(f"unknown --algos {unknown}; choose from {sorted(ALGOS)}")
-    if episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    budgets = {env: episodes for env in envs} if isinstance(episodes, int) else dict(episodes)
+    for env in envs:
+        if budgets.get(env, 0) < 1:
+            raise ValueError(f"--episodes for {env} must be >= 1, got {budgets.get(env)}")
     results_dir = Path(results_dir)
     results_dir.mkdir(parents=True, exist_ok=True)
     status: dict[str, list] = {"done": [], "skipped": [], "failed": []}
     tasks = []
-    for env in envs:
-        for algo in algos:
-            for seed in seeds:
+    for seed in seeds:
+        for env in envs:
+            for algo in algos:
                 task = {
                     "algo": algo,
                     "env": env,
                     "seed": int(seed),
-                    "episodes": int(episodes),
+                    "episodes": int(budgets[env]),
                     "hyperparams_dir": str(Path(hyperparams_dir).resolve()),
                 }
                 if run_paths(results_dir, algo, env, seed)[1].exists():
@@ -313,7 +319,7 @@ def sweep(
         "algos": list(algos),
         "envs": list(envs),
         "seeds": [int(s) for s in seeds],
-        "episodes": int(episodes),
+        "episodes": budgets,
         "workers": workers,
         "ray_address": ray_address,
         "started_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -351,6 +357,23 @@ def sweep(
     return status
 
 
+def parse_episodes(values: Sequence[str], envs: Sequence[str]) -> dict[str, int]:
+    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}`` for the selected envs."""
+    default, per_env = None, {}
+    for value in values:
+        name, sep, number = value.rpartition("=")
+        if not number.isdigit():
+            raise ValueError(f"--episodes: expected N or ENV=N, got {value!r}")
+        if sep:
+            per_env[name] = int(number)
+        else:
+            default = int(number)
+    missing = [env for env in envs if env not in per_env and default is None]
+    if missing:
+        raise ValueError(f"--episodes: no budget for {missing}; give N or ENV=N")
+    return {env: per_env.get(env, default) for env in envs}  # type: ignore[misc]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algos", nargs="+", default=list(ALGOS), help=f"subset of {list(ALGOS)}")
@@ -358,7 +381,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--envs", nargs="+", default=DEFAULT_ENVS, help=f"short names {list(fa.ENV_SPECS)} or any Gymnasium id"
     )
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    parser.add_argument("--episodes", type=int, default=100, help="episode budget of each run")
+    parser.add_argument(
+        "--episodes",
+        nargs="+",
+        default=["60", "halfcheetah=20"],
+        help="episode budget of each run: N for all envs, ENV=N for one env (e.g. 60 halfcheetah=20)",
+    )
     parser.add_argument("--results", default=str(DEFAULT_RESULTS_DIR), help="results folder")
     parser.add_argument("--hyperparams", default=str(DEFAULT_HYPERPARAMS_DIR), help="folder of <algo>.yml files")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="process pool size (0: in this process)")
@@ -370,7 +398,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.algos,
         args.envs,
         args.seeds,
-        args.episodes,
+        parse_episodes(args.episodes, args.envs),
         results_dir=args.results,
         hyperparams_dir=args.hyperparams,
         workers=args.workers,

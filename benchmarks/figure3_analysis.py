@@ -34,7 +34,7 @@ class EnvSpec:
         ``best >= threshold`` otherwise); ``None``: no threshold.
     :param score_range: (worst, best) reference scores for normalisation to [0, 1] in the aggregate (IQM);
         ``None``: min-max over all runs of the sweep on that env.
-    :param gamma: the paper's discount factor, used only when ``hyperparams/<algo>.yml`` has no entry.
+    :param gamma: the paper's discount factor, used only when ``sb3_denfac/hyperparams/<algo>.yml`` has no entry.
     :param label: panel title.
     """
 
