@@ -1,0 +1,129 @@
+"""Input checks shared by the package's algorithms, built on SB3's own tooling.
+
+- :class:`FiniteInputsMixin` wraps every environment an algorithm is given (constructor, ``set_env``, ``load(env=...)``)
+  in SB3's :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True``: a NaN or inf in an
+  observation (at reset or step), a reward or an action raises a ``ValueError`` naming which (``found nan in rewards``,
+  ``found inf in observations``...) instead of silently turning the networks' weights into NaN.
+- :class:`ModelFileCheckMixin` makes ``load`` refuse, with a ``ValueError`` naming the problem, a truncated or corrupted
+  model zip (SB3 itself only asserts "No data found") and a zip that another algorithm saved (e.g. a TD3 zip given to
+  ``DENFAC.load``, which SB3 would let fail somewhere inside ``_setup_model``).
+- :class:`InputChecksMixin` is both; add it as the FIRST base of an algorithm class::
+
+      class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm): ...
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import zipfile
+from typing import Any
+
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import json_to_data
+from stable_baselines3.common.type_aliases import GymEnv
+from stable_baselines3.common.vec_env import VecCheckNan, VecEnv, VecEnvWrapper
+
+
+def has_raising_nan_check(env: VecEnv) -> bool:
+    """True if a ``VecCheckNan(raise_exception=True)`` is somewhere in the VecEnv wrapper chain."""
+    while isinstance(env, VecEnvWrapper):
+        if isinstance(env, VecCheckNan) and env.raise_exception:
+            return True
+        env = env.venv
+    return False
+
+
+def wrap_check_finite(env: VecEnv) -> VecEnv:
+    """Wrap ``env`` in ``VecCheckNan(raise_exception=True, check_inf=True)`` unless such a check is already there.
+
+    The check sits outermost, so it also sees what a ``VecNormalize`` returns (a NaN/inf input makes its statistics, and
+    thus its output, non-finite). Dict action spaces are left alone (``VecCheckNan`` does not support them).
+    """
+    if isinstance(env.action_space, spaces.Dict) or has_raising_nan_check(env):
+        return env
+    return VecCheckNan(env, raise_exception=True, warn_once=False, check_inf=True)
+
+
+class FiniteInputsMixin:
+    """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (SB3's ``VecCheckNan``), see module doc.
+
+    Overrides BaseAlgorithm's static ``_wrap_env`` with a classmethod (``self._wrap_env`` and ``cls._wrap_env`` both
+    still work), so the check covers the constructor, ``set_env`` and ``load``.
+    """
+
+    @classmethod
+    def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
+        wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
+        return wrap_check_finite(wrapped)
+
+
+def _open_for_read(path: Any) -> Any:
+    """``path`` as SB3's ``load`` resolves it (a missing ``.zip`` suffix is added), or the file object itself."""
+    if isinstance(path, (str, pathlib.Path)):
+        path = pathlib.Path(path)
+        if not path.exists() and path.with_suffix(".zip").exists():
+            path = path.with_suffix(".zip")
+    return path
+
+
+def check_model_zip(path: Any) -> Any:
+    """Check that ``path`` is a complete SB3 model zip and return the ``policy_class`` it stores (None if unreadable).
+
+    :raises ValueError: the file is not a zip, lacks the ``data`` entry or has a corrupted entry (bad CRC). A truncated
+        model zip is a case of the second: ``zipfile`` then finds the zip of the torch ``.pth`` entry inside it, and
+        SB3's own ``load`` only asserts "No data found in the saved file".
+    """
+    target = _open_for_read(path)
+    if isinstance(target, pathlib.Path) and not target.exists():
+        return None  # SB3's load reports the missing file
+    position = target.tell() if hasattr(target, "tell") else None
+    try:
+        with zipfile.ZipFile(target) as archive:
+            names = archive.namelist()
+            if "data" not in names:
+                raise ValueError(
+                    f"{path} is not a complete SB3 model zip (no 'data' entry): the file is truncated or corrupted, "
+                    "or was not written by save()"
+                )
+            bad_entry = archive.testzip()
+            if bad_entry is not None:
+                raise ValueError(f"{path} is a corrupted model zip (bad CRC in entry {bad_entry!r})")
+            data_json = archive.read("data").decode()
+    except zipfile.BadZipFile as error:
+        raise ValueError(f"{path} is not a zip file: not an SB3 model, or a truncated or corrupted one") from error
+    finally:
+        if position is not None:
+            target.seek(position)
+    try:
+        if "policy_class" not in json.loads(data_json):
+            return None
+        return json_to_data(data_json).get("policy_class")
+    except Exception:  # noqa: BLE001 - an undecodable class is left to SB3's own error
+        return None
+
+
+class ModelFileCheckMixin:
+    """``load`` refuses, with a ``ValueError`` naming the problem, a file that is not a complete SB3 model zip
+    (:func:`check_model_zip`) or whose policy class is none of this algorithm's ``policy_aliases`` (a zip saved by
+    another algorithm)."""
+
+    policy_aliases: dict[str, type[BasePolicy]]
+
+    @classmethod
+    def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
+        policy_class = check_model_zip(path)
+        policy_class = (kwargs.get("custom_objects") or {}).get("policy_class", policy_class)
+        allowed = tuple(cls.policy_aliases.values())
+        if allowed and isinstance(policy_class, type) and not issubclass(policy_class, allowed):
+            raise ValueError(
+                f"{cls.__name__}.load: this model was saved by another algorithm (its policy is "
+                f"{policy_class.__module__}.{policy_class.__qualname__}, {cls.__name__} expects a subclass of "
+                f"{', '.join(c.__name__ for c in allowed)}); load it with the class that saved it"
+            )
+        return super().load(path, *args, **kwargs)  # type: ignore[misc]
+
+
+class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin):
+    """Both checks of this module; put it first in an algorithm's bases."""

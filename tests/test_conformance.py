@@ -1,0 +1,500 @@
+"""SB3's plugin contract for the package's five algorithms (after SB3's own tests: save/load, set_env, predict, batch
+norm train/eval mode, determinism, TensorBoard, callbacks, float64 actions, VecNormalize, progress bar).
+
+Every case is tiny: Pendulum-v1 cut to ``EPISODE`` steps, networks of a few units, one or two gradient steps per
+update. ``tests/test_reliability.py`` imports ``ALGOS``, ``algo_class``, ``make_model`` and ``make_env`` from here.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pathlib
+from copy import deepcopy
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+import sb3_denfac  # noqa: F401  (registers the paper envs)
+
+EPISODE = 20  # steps per episode of every test env
+ALGOS = ["denfac", "ddpg", "nfac", "cacla", "cmaes"]
+CLASS_PATHS = {
+    "denfac": "sb3_denfac.denfac:DENFAC",
+    "ddpg": "sb3_denfac.ddpg:DDPG",
+    "nfac": "sb3_denfac.nfac:NFAC",
+    "cacla": "sb3_denfac.cacla:CACLA",
+    "cmaes": "sb3_denfac.cmaes:CMAES",
+}
+#: Tiny configurations: every update is a handful of gradient steps on networks of a few units.
+TINY_KWARGS: dict[str, dict[str, Any]] = {
+    "denfac": dict(
+        buffer_size=5 * EPISODE,
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
+    "ddpg": dict(
+        buffer_size=5 * EPISODE,
+        learning_starts=10,
+        batch_size=8,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
+    "nfac": dict(
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4])),
+    ),
+    "cacla": dict(n_steps=EPISODE, bn_window=4, policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4]))),
+    "cmaes": dict(population_size=2, policy_kwargs=dict(net_arch=[4])),
+}
+OFF_POLICY = ["denfac", "ddpg"]
+#: predict(deterministic=False) samples the truncated Gaussian exploration policy.
+EXPLORING_PREDICT = ["denfac", "nfac", "cacla"]
+
+
+def algo_class(name: str) -> type[BaseAlgorithm]:
+    """The algorithm class; skips the test while its module has not landed yet."""
+    module_name, class_name = CLASS_PATHS[name].split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        if error.name is not None and module_name.startswith(error.name):
+            pytest.skip(f"{module_name} is not implemented yet")
+        raise
+    if not hasattr(module, class_name):
+        pytest.skip(f"{module_name}.{class_name} is not implemented yet")
+    return getattr(module, class_name)
+
+
+def make_env(episode: int = EPISODE) -> gym.Env:
+    return gym.make("Pendulum-v1", max_episode_steps=episode)
+
+
+def make_model(name: str, env: Any = None, **overrides: Any) -> BaseAlgorithm:
+    kwargs = deepcopy(TINY_KWARGS[name])
+    kwargs.update(overrides)
+    return algo_class(name)("MlpPolicy", make_env() if env is None else env, **kwargs)
+
+
+def sample_observations(space: spaces.Space, n: int = 10, seed: int = 0) -> np.ndarray:
+    space = deepcopy(space)
+    space.seed(seed)
+    return np.stack([space.sample() for _ in range(n)])
+
+
+def float_perturbation(state: dict[str, th.Tensor]) -> dict[str, th.Tensor]:
+    """A different value for every floating-point entry (positive shift: BN running variances stay > 0);
+    integer entries (BN ``num_batches_tracked``) are kept."""
+    return {
+        key: value + 0.1 + th.rand_like(value) if th.is_floating_point(value) else value.clone()
+        for key, value in state.items()
+    }
+
+
+def batch_norm_buffers(module: th.nn.Module) -> dict[str, th.Tensor]:
+    return {
+        f"{name}.{buffer}": getattr(layer, buffer).clone()
+        for name, layer in module.named_modules()
+        if isinstance(layer, th.nn.modules.batchnorm._BatchNorm)
+        for buffer in ("running_mean", "running_var")
+    }
+
+
+def assert_same_parameters(params_a: dict, params_b: dict) -> None:
+    assert params_a.keys() == params_b.keys()
+    for object_name, state in params_a.items():
+        if "optim" in object_name:  # optimizer state layouts are not tensor dicts
+            continue
+        assert state.keys() == params_b[object_name].keys()
+        for key, value in state.items():
+            assert th.equal(value, params_b[object_name][key]), f"{object_name}.{key} differs"
+
+
+# ----- save / load (SB3 tests/test_save_load.py) -----------------------------------------------------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_save_load(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name, seed=0)
+    model.learn(2 * EPISODE)
+    observations = sample_observations(model.observation_space)
+    original = deepcopy(model.get_parameters())
+
+    invalid = deepcopy(original)
+    invalid["not_an_object"] = "not a tensor"
+    for exact in (True, False):
+        with pytest.raises(ValueError):
+            model.set_parameters(invalid, exact_match=exact)
+    with pytest.raises(ValueError):
+        model.set_parameters(dict(list(original.items())[:-1]), exact_match=True)
+
+    perturbed = {k: v if "optim" in k else float_perturbation(v) for k, v in original.items()}
+    model.set_parameters(perturbed, exact_match=True)
+    params = deepcopy(model.get_parameters())
+    for object_name, state in original.items():
+        if "optim" in object_name:
+            continue
+        for key, value in state.items():
+            changed = not th.equal(value, params[object_name][key])
+            assert changed == th.is_floating_point(value), f"{object_name}.{key}: perturbation not applied as expected"
+
+    actions, _ = model.predict(observations, deterministic=True)
+    num_timesteps = model.num_timesteps
+    model.save(tmp_path / "model.zip")
+    env = model.get_env()
+    del model
+
+    model = algo_class(name).load(tmp_path / "model.zip", env=env, device="cpu")
+    assert model.num_timesteps == num_timesteps
+    assert_same_parameters(params, model.get_parameters())
+    new_actions, _ = model.predict(observations, deterministic=True)
+    np.testing.assert_allclose(actions, new_actions, rtol=1e-6, atol=1e-6)
+    model.learn(EPISODE)  # training goes on after a load
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_set_env(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name)
+    model.learn(EPISODE)
+
+    model.set_env(DummyVecEnv([make_env]), force_reset=True)
+    assert model._last_obs is None
+    model.learn(2 * EPISODE, reset_num_timesteps=True)
+    assert model.num_timesteps == 2 * EPISODE
+
+    model.set_env(make_env())  # a plain gym.Env is wrapped
+    model.learn(EPISODE)
+    with pytest.raises(AssertionError, match="number of environments"):
+        model.set_env(DummyVecEnv([make_env, make_env]))
+
+    model.set_env(model.get_env(), force_reset=False)
+    assert model._last_obs is not None
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.num_timesteps == 2 * EPISODE
+
+    env = model.get_env()
+    model.save(tmp_path / "model.zip")
+    model = algo_class(name).load(tmp_path / "model.zip", env=env, force_reset=False)
+    assert model._last_obs is not None
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.num_timesteps == 3 * EPISODE
+
+    model = algo_class(name).load(tmp_path / "model.zip", env=make_env(), force_reset=True)
+    assert model._last_obs is None
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.num_timesteps == 3 * EPISODE
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_exclude_include_saved_params(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name, verbose=2)
+    model.save(tmp_path / "model", exclude=["verbose"])
+    model = algo_class(name).load(tmp_path / "model.zip")
+    assert model.verbose != 2
+
+    model.verbose = 2
+    model.save(tmp_path / "model", exclude=["verbose"], include=["verbose"])
+    model = algo_class(name).load(tmp_path / "model.zip", custom_objects=dict(learning_rate=2e-5, dummy=1.0))
+    assert model.verbose == 2
+    assert model.learning_rate == 2e-5
+    assert not hasattr(model, "dummy")
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_save_load_policy(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name)
+    model.learn(EPISODE)
+    policy = model.policy
+    if not callable(getattr(policy, "save", None)):
+        pytest.skip(f"{name}'s policy has no save()")
+    observations = sample_observations(model.observation_space)
+
+    params = deepcopy(policy.state_dict())
+    policy.load_state_dict(float_perturbation(params))
+    params = deepcopy(policy.state_dict())
+    actions, _ = policy.predict(observations, deterministic=True)
+    policy.save(tmp_path / "policy.pkl")
+
+    loaded = type(policy).load(tmp_path / "policy.pkl", device="cpu")
+    assert type(loaded) is type(policy)
+    for key, value in loaded.state_dict().items():
+        assert th.equal(value, params[key]), key
+    new_actions, _ = loaded.predict(observations, deterministic=True)
+    np.testing.assert_allclose(actions, new_actions, rtol=1e-6, atol=1e-6)
+
+    actor = getattr(policy, "actor", None)  # off-policy actors are policies of their own (SB3's TD3 test)
+    if callable(getattr(actor, "save", None)) and callable(getattr(actor, "predict", None)):
+        actor_actions, _ = actor.predict(observations, deterministic=True)
+        np.testing.assert_allclose(actions, actor_actions, rtol=1e-6, atol=1e-6)
+        actor.save(tmp_path / "actor.pkl")
+        loaded_actor = type(actor).load(tmp_path / "actor.pkl", device="cpu")
+        np.testing.assert_allclose(actions, loaded_actor.predict(observations, deterministic=True)[0], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("name", OFF_POLICY)
+def test_save_load_replay_buffer(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name)
+    model.learn(2 * EPISODE)
+    assert isinstance(model, OffPolicyAlgorithm)
+    old_buffer = deepcopy(model.replay_buffer)
+    model.save_replay_buffer(tmp_path / "logs" / "replay_buffer.pkl")
+    model.replay_buffer = None
+    model.load_replay_buffer(tmp_path / "logs" / "replay_buffer.pkl")
+    buffer = model.replay_buffer
+    assert type(buffer) is type(old_buffer)
+    assert (buffer.pos, buffer.full, buffer.buffer_size) == (old_buffer.pos, old_buffer.full, old_buffer.buffer_size)
+    arrays = [key for key, value in vars(old_buffer).items() if isinstance(value, np.ndarray)]
+    assert {"observations", "actions", "rewards", "dones", "timeouts"} <= set(arrays)
+    for key in arrays:  # includes algorithm-specific fields (DENFAC's behaviour means)
+        np.testing.assert_array_equal(getattr(buffer, key), getattr(old_buffer, key), err_msg=key)
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.replay_buffer.size() == 3 * EPISODE
+
+
+# ----- determinism (SB3 tests/test_deterministic.py) -------------------------------------------------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_deterministic_training(name: str) -> None:
+    observations = sample_observations(make_env().observation_space)
+
+    def run(seed: int) -> tuple[dict, dict, np.ndarray]:
+        model = make_model(name, seed=seed)
+        initial = deepcopy(model.get_parameters())
+        model.learn(3 * EPISODE)
+        return initial, model.get_parameters(), model.predict(observations, deterministic=True)[0]
+
+    initial, params, actions = run(seed=3)
+    _, params_again, actions_again = run(seed=3)
+    assert_same_parameters(params, params_again)
+    np.testing.assert_array_equal(actions, actions_again)
+
+    def policy_vector(parameters: dict) -> th.Tensor:
+        state = parameters["policy"]
+        return th.cat([v.flatten().float() for v in state.values() if th.is_floating_point(v)])
+
+    assert not th.equal(policy_vector(initial), policy_vector(params)), "learn() did not change the policy"
+    _, params_other, _ = run(seed=4)
+    assert not th.equal(policy_vector(params), policy_vector(params_other)), "the seed has no effect"
+
+
+# ----- predict (SB3 tests/test_predict.py) -----------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_predict_shapes_and_wrapping(name: str) -> None:
+    model = make_model(name)
+    model.learn(EPISODE)
+    low, high = model.action_space.low, model.action_space.high
+    obs_space, act_shape = model.observation_space, model.action_space.shape
+
+    for deterministic in (True, False):
+        action, state = model.predict(obs_space.sample(), deterministic=deterministic)
+        assert action.shape == act_shape and state is None
+        assert action.dtype == model.action_space.dtype
+        actions, _ = model.predict(sample_observations(obs_space, n=5), deterministic=deterministic)
+        assert actions.shape == (5, *act_shape)
+        assert np.all(actions >= low) and np.all(actions <= high)
+
+    vec_env = DummyVecEnv([make_env, make_env, make_env])
+    vec_obs = vec_env.reset()
+    actions, _ = model.predict(vec_obs, deterministic=True)
+    assert actions.shape == (3, *act_shape)
+    vec_env.step(actions)
+
+    single, _ = model.predict(vec_obs[0], deterministic=True)
+    np.testing.assert_allclose(single, actions[0], rtol=1e-6, atol=1e-6)  # batch-norm eval mode: no batch effect
+    again, _ = model.predict(vec_obs, deterministic=True)
+    np.testing.assert_array_equal(actions, again)
+    stochastic = np.stack([model.predict(vec_obs, deterministic=False)[0] for _ in range(5)])
+    if name in EXPLORING_PREDICT:
+        assert not np.all(stochastic == stochastic[0]), "deterministic=False must sample the exploration policy"
+    elif name == "ddpg":  # SB3's TD3/DDPG semantics: predict() is the deterministic actor, noise is added in learn()
+        np.testing.assert_array_equal(stochastic[0], actions)
+
+    with pytest.raises(ValueError, match="Unexpected observation shape"):
+        model.predict(np.zeros((2, 7), dtype=np.float32))
+
+
+# ----- batch norm: train / eval mode (SB3 tests/test_train_eval_mode.py) -----------------------------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_batch_norm_train_eval_mode(name: str) -> None:
+    model = make_model(name)
+    model.learn(EPISODE)
+    before = batch_norm_buffers(model.policy)
+    if not before:
+        pytest.skip(f"{name}'s policy has no batch norm")
+    observations = sample_observations(model.observation_space)
+    for deterministic in (True, False):
+        model.predict(observations, deterministic=deterministic)
+        model.predict(observations[0], deterministic=deterministic)  # a batch of 1 works in eval mode
+    after_predict = batch_norm_buffers(model.policy)
+    for key, value in before.items():
+        assert th.equal(value, after_predict[key]), f"predict() changed the running statistics {key}"
+
+    model.learn(2 * EPISODE, reset_num_timesteps=False)
+    after_learn = batch_norm_buffers(model.policy)
+    changed = [key for key, value in before.items() if not th.equal(value, after_learn[key])]
+    assert changed, "training did not update any batch-norm running statistics"
+
+
+# ----- logging, callbacks, progress bar (SB3 tests/test_tensorboard.py, test_callbacks.py) -----------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    model = make_model(name, tensorboard_log=str(tmp_path))
+    model.learn(3 * EPISODE, log_interval=1)
+    class_name = type(model).__name__
+    run_dirs = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert [p.name for p in run_dirs] == [f"{class_name}_1"], "tb_log_name must default to the class name"
+    event_files = list(run_dirs[0].glob("events.out.tfevents.*"))
+    assert event_files
+    accumulator = EventAccumulator(str(run_dirs[0]))
+    accumulator.Reload()
+    tags = accumulator.Tags()["scalars"]
+    assert any(tag.startswith("train/") for tag in tags), tags
+    assert "time/fps" in tags or any(tag.startswith("rollout/") for tag in tags), tags
+
+    model.learn(EPISODE, reset_num_timesteps=False, log_interval=1)  # continues the same run
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
+
+
+class CountingCallback(BaseCallback):
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = dict(training_start=0, rollout_start=0, step=0, rollout_end=0, training_end=0)
+
+    def _on_training_start(self) -> None:
+        self.calls["training_start"] += 1
+
+    def _on_rollout_start(self) -> None:
+        self.calls["rollout_start"] += 1
+
+    def _on_step(self) -> bool:
+        self.calls["step"] += 1
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.calls["rollout_end"] += 1
+
+    def _on_training_end(self) -> None:
+        self.calls["training_end"] += 1
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_callbacks(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name)
+    counting = CountingCallback()
+    checkpoint = CheckpointCallback(
+        save_freq=2 * EPISODE,
+        save_path=str(tmp_path / "checkpoints"),
+        save_replay_buffer=name in OFF_POLICY,
+    )
+    evaluation = EvalCallback(
+        make_env(),
+        eval_freq=2 * EPISODE,
+        n_eval_episodes=1,
+        log_path=str(tmp_path / "eval"),
+        best_model_save_path=str(tmp_path / "best"),
+        warn=False,
+    )
+    model.learn(4 * EPISODE, callback=CallbackList([counting, checkpoint, evaluation]))
+
+    assert counting.calls["step"] == model.num_timesteps == 4 * EPISODE
+    assert counting.calls["training_start"] == counting.calls["training_end"] == 1
+    assert counting.calls["rollout_start"] >= 1 and counting.calls["rollout_end"] >= 1
+    for steps in (2 * EPISODE, 4 * EPISODE):
+        assert (tmp_path / "checkpoints" / f"rl_model_{steps}_steps.zip").exists()
+    if name in OFF_POLICY:
+        assert (tmp_path / "checkpoints" / f"rl_model_replay_buffer_{2 * EPISODE}_steps.pkl").exists()
+    loaded = algo_class(name).load(tmp_path / "checkpoints" / f"rl_model_{2 * EPISODE}_steps.zip")
+    assert loaded.num_timesteps == 2 * EPISODE
+    evaluations = np.load(tmp_path / "eval" / "evaluations.npz")
+    np.testing.assert_array_equal(evaluations["timesteps"], [2 * EPISODE, 4 * EPISODE])
+    assert (tmp_path / "best" / "best_model.zip").exists()
+
+
+class StopAfter(BaseCallback):
+    def __init__(self, n_calls: int) -> None:
+        super().__init__()
+        self.limit = n_calls
+
+    def _on_step(self) -> bool:
+        return self.n_calls < self.limit
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_callback_stops_training(name: str) -> None:
+    model = make_model(name)
+    model.learn(10 * EPISODE, callback=StopAfter(EPISODE + 5))
+    assert model.num_timesteps == EPISODE + 5
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_progress_bar(name: str) -> None:
+    model = make_model(name)
+    model.learn(2 * EPISODE, progress_bar=True)
+    assert model.num_timesteps == 2 * EPISODE
+
+
+# ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
+class Float64ActionEnv(gym.Env):
+    """Observation Box(-1, 1, (2,)) float32, action Box(-3, 3, (2,)) float64; reward -|a|^2."""
+
+    observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    action_space = spaces.Box(-3.0, 3.0, shape=(2,), dtype=np.float64)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        assert self.action_space.contains(action), action
+        return self.observation_space.sample(), -float(np.sum(np.square(action))), False, False, {}
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_float64_action_space(name: str) -> None:
+    """Box float64 actions work like float32 ones: actions keep the space's dtype and bounds."""
+    env = gym.wrappers.TimeLimit(Float64ActionEnv(), max_episode_steps=EPISODE)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    observation, _ = env.reset(seed=0)
+    for deterministic in (True, False):
+        action, _ = model.predict(observation, deterministic=deterministic)
+        assert action.dtype == np.float64
+        assert env.action_space.contains(action)
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
+    env = VecNormalize(DummyVecEnv([make_env]), gamma=0.9, norm_obs=True, norm_reward=True)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    assert model.get_vec_normalize_env() is env
+    assert env.obs_rms.count > 2 * EPISODE
+    if isinstance(model, OffPolicyAlgorithm):
+        # The replay buffer keeps the original observations (Pendulum: cos^2 + sin^2 = 1), normalised at sampling.
+        observations = model.replay_buffer.observations[: model.replay_buffer.size(), 0]
+        np.testing.assert_allclose(np.square(observations[:, :2]).sum(axis=1), 1.0, rtol=1e-5)
+    env.save(str(tmp_path / "vec_normalize.pkl"))
+    model.save(tmp_path / "model.zip")
+    loaded_env = VecNormalize.load(str(tmp_path / "vec_normalize.pkl"), DummyVecEnv([make_env]))
+    model = algo_class(name).load(tmp_path / "model.zip", env=loaded_env)
+    assert model.get_vec_normalize_env() is loaded_env
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.num_timesteps == 3 * EPISODE
+
+
+# ----- off-policy train frequency (SB3 tests/test_run.py) --------------------------------------------------------------
+@pytest.mark.parametrize("train_freq", [4, (2, "step"), (1, "episode")])
+def test_ddpg_train_freq(train_freq: Any) -> None:
+    model = make_model("ddpg", train_freq=train_freq, gradient_steps=-1, learning_starts=EPISODE)
+    model.learn(2 * EPISODE)
+    assert model.num_timesteps == 2 * EPISODE
+    assert model._n_updates == EPISODE  # gradient_steps=-1: one update per collected step after learning_starts
