@@ -123,10 +123,7 @@ def register() -> None:
     HYPERPARAMS_SAMPLER.setdefault("sb3_ddpg", HYPERPARAMS_SAMPLER["ddpg"])
     HYPERPARAMS_CONVERTER.setdefault("sb3_ddpg", HYPERPARAMS_CONVERTER["ddpg"])
     for name in ALGORITHMS:
-        try:  # TODO(dev): remove once all five algorithms have landed
-            rl_zoo3.ALGOS[name] = algorithm_class(name)
-        except (ImportError, AttributeError) as e:
-            print(f"sb3-denfac-zoo: {name} unavailable: {e}", file=sys.stderr)
+        rl_zoo3.ALGOS[name] = algorithm_class(name)
     HYPERPARAMS_SAMPLER.update(zoo_samplers.SAMPLERS)
     HYPERPARAMS_CONVERTER.update(zoo_samplers.CONVERTERS)
 
@@ -404,6 +401,8 @@ def prepare_train_args(argv: Sequence[str]) -> list[str]:
     conf = args.conf_file
     if conf is None:
         ours = default_config_path(algo)
+        if algo in ALGORITHMS and not ours.is_file():
+            raise ZooConfigError(f"No hyperparameter file for {algo!r}: expected {ours}; pass --conf-file")
         if ours.is_file() and (algo in ALGORITHMS or env_id in load_config_file(ours)):
             conf = str(ours)
             argv += ["--conf-file", conf]

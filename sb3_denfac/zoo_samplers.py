@@ -129,6 +129,30 @@ def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
 
 
 # --------------------------------------------------------------------------------------------------------------------
+# CACLA (online, on-policy, V critic)
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def convert_cacla_params(params: dict[str, Any]) -> dict[str, Any]:
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch")
+    hyperparams["policy_kwargs"] = _policy_kwargs(params, critic_key="vf")
+    return hyperparams
+
+
+def sample_cacla_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """CACLA: alpha_a, alpha_c, sigma, batch-norm statistics window, network sizes."""
+    params = {
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 0.1, log=True),
+        "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
+        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
+        "bn_window": trial.suggest_categorical("bn_window", [8, 32, 128]),
+        "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
+        "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
+    }
+    return convert_cacla_params(params)
+
+
+# --------------------------------------------------------------------------------------------------------------------
 # CMA-ES (actor-only)
 # --------------------------------------------------------------------------------------------------------------------
 
@@ -159,11 +183,13 @@ SAMPLERS = {
     "denfac": sample_denfac_params,
     "ddpg": sample_ddpg_params,
     "nfac": sample_nfac_params,
+    "cacla": sample_cacla_params,
     "cmaes": sample_cmaes_params,
 }
 CONVERTERS = {
     "denfac": convert_denfac_params,
     "ddpg": convert_ddpg_params,
     "nfac": convert_nfac_params,
+    "cacla": convert_cacla_params,
     "cmaes": convert_cmaes_params,
 }

@@ -23,7 +23,7 @@ CHEAP_PARAMS = {
     "denfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
     "ddpg": ["gradient_steps:1"],
     "nfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
-    "cacla": [],
+    "cacla": ["n_steps:100"],
     "cmaes": ["population_size:4"],
     "td3": ["learning_starts:100"],
 }
@@ -67,12 +67,17 @@ def test_zoo_trains_from_yaml(algo: str, tmp_path: Path) -> None:
     assert any(tag.startswith("rollout/") for tag in tags), tags  # return curves
 
 
-def test_enjoy_runs_a_trained_agent(tmp_path: Path) -> None:
-    """The zoo's enjoy script loads the saved agent without an env (as SB3 ``load(path)``) and plays it."""
+@pytest.mark.parametrize("algo", sorted(zoo.ALGORITHMS))
+def test_enjoy_runs_a_trained_agent(algo: str, tmp_path: Path) -> None:
+    """The zoo's enjoy script loads the saved agent without an env (SB3 ``load(path)``) and plays it."""
     logs = tmp_path / "logs"
-    common = ["--algo", "denfac", "--env", ENV, "-f", str(logs), "--seed", "0", "--verbose", "0"]
-    zoo.main(["train", *common, "-n", "100", "--eval-freq", "-1", "-params", *CHEAP_PARAMS["denfac"]])
-    zoo.main(["enjoy", *common, "-n", "50", "--no-render", "--deterministic"])
+    common = ["--algo", algo, "--env", ENV, "-f", str(logs), "--seed", "0", "--verbose", "0"]
+    params = ["-params", *CHEAP_PARAMS[algo]] if CHEAP_PARAMS[algo] else []
+    zoo.main(["train", *common, "-n", "100", "--eval-freq", "-1", *params])
+    reward_log = tmp_path / "enjoy"
+    zoo.main(["enjoy", *common, "-n", "600", "--no-render", "--deterministic", "--reward-log", str(reward_log)])
+    # The Monitor of the enjoy run recorded at least one finished episode (CartPole episodes end within 500 steps).
+    assert len((reward_log / "0.monitor.csv").read_text().splitlines()) >= 3
 
 
 def _study(logs: Path, algo: str) -> optuna.Study:
