@@ -19,6 +19,7 @@ from stable_baselines3.common.utils import safe_mean
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
+from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -36,7 +37,7 @@ class _Randn:
         return self.rng.standard_normal(shape)
 
 
-class CMAES(BaseAlgorithm):
+class CMAES(InputChecksMixin, BaseAlgorithm):
     """CMA-ES over the weights of the actor network, the actor-only baseline of the DENFAC paper.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4: CMA-ES (Hansen
@@ -63,6 +64,9 @@ class CMAES(BaseAlgorithm):
     Saved with the model (``save``/``load``): the policy weights (torch), the pickled ``cma.CMAEvolutionStrategy``
     (mean, step size, covariance, evolution paths and its private random generator), the unfinished generation,
     the best candidate and its return, and the generation count.
+
+    Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
+    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
 
     :param policy: policy class or "MlpPolicy" (:class:`sb3_denfac.cmaes.policies.CMAESPolicy`; policy_kwargs:
         ``net_arch``, ``batch_norm`` (default False), ``init``, ``activation_fn``)

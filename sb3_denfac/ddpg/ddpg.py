@@ -14,6 +14,7 @@ from stable_baselines3.common.utils import FloatSchedule, polyak_update, update_
 from stable_baselines3.ddpg import DDPG as SB3DDPG
 from torch.nn import functional as F
 
+from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.networks import set_bn_training_mode
@@ -27,7 +28,7 @@ def _check_learning_rate(name: str, value: float | Schedule | None) -> None:
         raise ValueError(f"{name} must be a positive number or a schedule, got {value!r}")
 
 
-class DDPG(TruncatedGaussianExplorationMixin, SB3DDPG):
+class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
     """Deep Deterministic Policy Gradient (Lillicrap et al. 2016) in the configuration the DENFAC paper compares with.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4, Figure 5: DDPG with
@@ -39,6 +40,9 @@ class DDPG(TruncatedGaussianExplorationMixin, SB3DDPG):
     With ``inverting_gradients=True`` the actor update back-propagates dQ/da scaled by the distance to the bound it
     pushes toward (sign reversed beyond it, :mod:`sb3_denfac.common.inverting_gradients`), which pulls out-of-bound
     outputs back; targets and executed actions use the actor output clamped to [-1, 1].
+
+    Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
+    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
 
     Differences from SB3's DDPG: networks and exploration above; separate actor and critic learning rates (alpha_a,
     alpha_c); with ``batch_norm=False``, ``init="default"``, ``activation_fn=nn.ReLU``, a tanh actor and ``sigma=None`` it
