@@ -75,7 +75,9 @@ class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
     :param optimize_memory_usage: memory-efficient replay buffer variant
     :param n_steps: n-step returns (SB3's NStepReplayBuffer)
     :param tensorboard_log: TensorBoard log directory (logs train/actor_loss, train/critic_loss, train/q_value,
-        train/actor_out_of_bounds, train/actor_learning_rate, train/learning_rate)
+        train/actor_out_of_bounds (fraction of raw actor outputs outside [-1, 1]), train/actor_learning_rate,
+        train/learning_rate; with inverting gradients train/actor_loss is -mean Q, the inverted gradient having no
+        scalar loss)
     :param policy_kwargs: keyword arguments of the policy
     :param verbose: verbosity level
     :param seed: random seed
