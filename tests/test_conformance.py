@@ -136,6 +136,10 @@ def test_save_load(tmp_path: pathlib.Path, name: str) -> None:
     with pytest.raises(ValueError):
         model.set_parameters(dict(list(original.items())[:-1]), exact_match=True)
 
+    missing_entry = {k: v if "optim" in k else dict(list(v.items())[:-1]) for k, v in original.items()}
+    with pytest.raises(RuntimeError):  # torch's strict load_state_dict
+        model.set_parameters(missing_entry, exact_match=True)
+
     perturbed = {k: v if "optim" in k else float_perturbation(v) for k, v in original.items()}
     model.set_parameters(perturbed, exact_match=True)
     params = deepcopy(model.get_parameters())
@@ -444,10 +448,12 @@ def test_progress_bar(name: str) -> None:
 
 # ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
 class Float64ActionEnv(gym.Env):
-    """Observation Box(-1, 1, (2,)) float32, action Box(-3, 3, (2,)) float64; reward -|a|^2."""
+    """Observation Box(-1, 1, (2,)) (float32 or float64, as HalfCheetah), action Box(-3, 3, (2,)) float64; reward -|a|^2."""
 
-    observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
     action_space = spaces.Box(-3.0, 3.0, shape=(2,), dtype=np.float64)
+
+    def __init__(self, obs_dtype: type = np.float32) -> None:
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=obs_dtype)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
@@ -458,10 +464,11 @@ class Float64ActionEnv(gym.Env):
         return self.observation_space.sample(), -float(np.sum(np.square(action))), False, False, {}
 
 
+@pytest.mark.parametrize("obs_dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("name", ALGOS)
-def test_float64_action_space(name: str) -> None:
+def test_float64_action_space(name: str, obs_dtype: type) -> None:
     """Box float64 actions work like float32 ones: actions keep the space's dtype and bounds."""
-    env = gym.wrappers.TimeLimit(Float64ActionEnv(), max_episode_steps=EPISODE)
+    env = gym.wrappers.TimeLimit(Float64ActionEnv(obs_dtype), max_episode_steps=EPISODE)
     model = make_model(name, env=env)
     model.learn(2 * EPISODE)
     observation, _ = env.reset(seed=0)
@@ -498,3 +505,36 @@ def test_ddpg_train_freq(train_freq: Any) -> None:
     model.learn(2 * EPISODE)
     assert model.num_timesteps == 2 * EPISODE
     assert model._n_updates == EPISODE  # gradient_steps=-1: one update per collected step after learning_starts
+
+
+# ----- env ids and true terminations ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ALGOS)
+def test_env_id_string(name: str) -> None:
+    """An env id is made by SB3 (Pendulum-v1: 200-step episodes)."""
+    overrides = dict(buffer_size=200) if name == "denfac" else {}
+    model = make_model(name, env="Pendulum-v1", **overrides)
+    model.learn(10)
+    assert model.num_timesteps >= 10
+    assert model.get_env().get_attr("spec")[0].id == "Pendulum-v1"
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_true_terminations(name: str) -> None:
+    """The paper's CartPole ends early on failure: training runs through terminations and, off-policy, the buffer tells
+    failures (dones without timeout) from time limits (timeouts)."""
+    horizon = 5 * EPISODE  # a random start fails in about 50 steps
+    env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, episode_length=horizon, random_start=True)
+    overrides = dict(buffer_size=4 * horizon) if name in OFF_POLICY else {}
+    model = make_model(name, env=env, seed=0, **overrides)
+    model.learn(2 * horizon)
+    assert model.num_timesteps >= 2 * horizon
+    lengths = [info["l"] for info in model.ep_info_buffer]
+    failures = sum(length < horizon for length in lengths)
+    assert failures >= 1, "the test needs early terminations"
+    if isinstance(model, OffPolicyAlgorithm):
+        size = model.replay_buffer.size()
+        dones = model.replay_buffer.dones[:size, 0].astype(bool)
+        timeouts = model.replay_buffer.timeouts[:size, 0].astype(bool)
+        assert dones.sum() == len(lengths)  # every finished episode ends with done
+        assert (dones & ~timeouts).sum() >= failures  # failures are true terminations, not time limits
+        assert timeouts.sum() <= len(lengths) - failures

@@ -71,6 +71,26 @@ def test_ddpg_episodic_training_needs_one_env() -> None:
         model.learn(EPISODE)
 
 
+class UnboundedActionEnv(DiscreteActionEnv):
+    def __init__(self) -> None:
+        super().__init__(spaces.Box(-np.inf, np.inf, shape=(1,), dtype=np.float32))
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_unbounded_action_space_is_refused(name: str) -> None:
+    algo_class(name)
+    with pytest.raises((ValueError, AssertionError), match="finite"):
+        make_model(name, env=gym.wrappers.TimeLimit(UnboundedActionEnv(), max_episode_steps=EPISODE))
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_load_with_mismatched_env(tmp_path: pathlib.Path, name: str) -> None:
+    make_model(name).save(tmp_path / "model.zip")
+    cartpole = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=EPISODE, episode_length=EPISODE)
+    with pytest.raises(ValueError, match="Observation spaces do not match"):
+        algo_class(name).load(tmp_path / "model.zip", env=cartpole)
+
+
 # ----- NaN / inf inputs ------------------------------------------------------------------------------------------------
 class CorruptingWrapper(gym.Wrapper):
     """Puts ``value`` into the observation (at reset or at step ``at_step``) or into the reward of step ``at_step``."""
@@ -197,6 +217,7 @@ INVALID = {
     ],
     "ddpg": [
         (dict(tau=0.0), "tau"),
+        (dict(actor_learning_rate=-1.0), "actor_learning_rate"),
         (dict(batch_size=1), "batch_size"),
         (dict(sigma=-0.1), "sigma"),
         (dict(gradient_steps=0), "gradient_steps"),
@@ -206,6 +227,8 @@ INVALID = {
     "nfac": [
         (dict(n_episodes=0), "n_episodes"),
         (dict(n_fitted_iterations=0), "n_fitted_iterations"),
+        (dict(critic_steps=0), "critic_steps"),
+        (dict(actor_steps=0), "actor_steps"),
         (dict(sigma=0.0), "sigma"),
         (dict(learning_rate=-1e-3), "learning_rate"),
         (dict(critic_learning_rate=0.0), "critic_learning_rate"),
