@@ -19,11 +19,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import importlib
 import io
 import json
 import os
 import platform
+import signal
+import subprocess
 import sys
 import time
 import traceback
@@ -215,7 +218,14 @@ def machine_info() -> dict[str, Any]:
             if line.startswith("model name"):
                 cpu = line.split(":", 1)[1].strip()
                 break
+    git: dict[str, Any] = {}
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        run = functools.partial(subprocess.run, cwd=_REPO, capture_output=True, text=True, timeout=10, check=True)
+        git["commit"] = run(["git", "rev-parse", "HEAD"]).stdout.strip()
+        # the code actually run: uncommitted changes to the package are listed
+        git["modified"] = run(["git", "status", "--porcelain", "--", "sb3_denfac"]).stdout.splitlines()
     return {
+        "git": git,
         "nproc": os.cpu_count(),
         "cpu_model": cpu or platform.processor(),
         "python": platform.python_version(),
@@ -244,9 +254,15 @@ def _run_local(tasks: list[dict[str, Any]], workers: int, on_result: Callable[[d
 
     # spawn: fresh interpreters (no inherited torch thread pools), same behaviour on Linux and macOS
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker) as pool:
-        futures = [pool.submit(run_one, task) for task in tasks]
-        for future in as_completed(futures):
-            on_result(future.result())
+        try:
+            futures = [pool.submit(run_one, task) for task in tasks]
+            for future in as_completed(futures):
+                on_result(future.result())
+        except BaseException:  # interrupted (Ctrl-C, SIGTERM): do not leave workers training in the background
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
 
 
 def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dict[str, Any]], None]) -> None:
@@ -374,7 +390,12 @@ def parse_episodes(values: Sequence[str], envs: Sequence[str]) -> dict[str, int]
     return {env: per_env.get(env, default) for env in envs}  # type: ignore[misc]
 
 
+def _exit_on_sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(f"interrupted by signal {signum}; finished runs are kept, rerun the same command to resume")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algos", nargs="+", default=list(ALGOS), help=f"subset of {list(ALGOS)}")
     parser.add_argument(
