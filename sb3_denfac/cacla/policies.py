@@ -1,8 +1,15 @@
-"""CACLA policy: deterministic actor mu(s) and state-value critic V(s) ("CACLA+" with batch norm), shared with NFAC."""
+"""CACLA policy: deterministic actor mu(s) and state-value critic V(s) ("CACLA+" with batch norm)."""
 
 from sb3_denfac.common.on_policy import DeterministicActorValuePolicy
 
-CACLAPolicy = DeterministicActorValuePolicy
-MlpPolicy = DeterministicActorValuePolicy
+
+class CACLAPolicy(DeterministicActorValuePolicy):
+    """CACLA's actor mu(s) and critic V(s); see :class:`~sb3_denfac.common.on_policy.DeterministicActorValuePolicy`.
+
+    A class of its own so that an NFAC model file is not mistaken for a CACLA one.
+    """
+
+
+MlpPolicy = CACLAPolicy
 
 __all__ = ["CACLAPolicy", "MlpPolicy"]

@@ -28,6 +28,7 @@ from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
+from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.common.networks import create_bn_mlp, has_batch_norm, reset_parameters_
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -213,10 +214,11 @@ def check_positive(name: str, value: float, integer: bool = False) -> None:
         raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
-class DeterministicOnPolicyAlgorithm(OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
-    learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``.
+    learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
+    corrupted or foreign model files raise a ValueError (:class:`~sb3_denfac.common.checks.InputChecksMixin`).
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 
@@ -277,7 +279,8 @@ class DeterministicOnPolicyAlgorithm(OnPolicyAlgorithm):
         )
         self.critic_learning_rate = critic_learning_rate
         self.sigma = sigma
-        self._check_spaces()
+        if self.env is not None:  # load() builds the model without an env
+            self._check_spaces()
         if _init_setup_model:
             self._setup_model()
 

@@ -112,8 +112,8 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             device=device,
             _init_setup_model=False,
         )
-        if self.n_envs != 1:
-            raise ValueError(f"NFAC learns from whole episodes and needs a single environment, got n_envs={self.n_envs}")
+        if self.env is not None:
+            self._check_n_envs(self.n_envs)
         self.n_episodes = n_episodes
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
@@ -123,6 +123,11 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         self.update_critic_first = update_critic_first
         if _init_setup_model:
             self._setup_model()
+
+    @staticmethod
+    def _check_n_envs(n_envs: int) -> None:
+        if n_envs != 1:
+            raise ValueError(f"NFAC learns from whole episodes and needs a single environment, got n_envs={n_envs}")
 
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
         return n_episodes >= self.n_episodes

@@ -2,7 +2,14 @@
 
 from sb3_denfac.common.on_policy import DeterministicActorValuePolicy
 
-NFACPolicy = DeterministicActorValuePolicy
-MlpPolicy = DeterministicActorValuePolicy
+
+class NFACPolicy(DeterministicActorValuePolicy):
+    """NFAC's actor mu(s) and critic V(s); see :class:`~sb3_denfac.common.on_policy.DeterministicActorValuePolicy`.
+
+    A class of its own so that a CACLA model file is not mistaken for an NFAC one.
+    """
+
+
+MlpPolicy = NFACPolicy
 
 __all__ = ["MlpPolicy", "NFACPolicy"]
