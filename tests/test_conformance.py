@@ -538,3 +538,41 @@ def test_true_terminations(name: str) -> None:
         assert dones.sum() == len(lengths)  # every finished episode ends with done
         assert (dones & ~timeouts).sum() >= failures  # failures are true terminations, not time limits
         assert timeouts.sum() <= len(lengths) - failures
+
+
+# ----- learning-rate schedules and several environments ---------------------------------------------------------------
+def _optimizers(model: BaseAlgorithm) -> list[th.optim.Optimizer]:
+    policy = model.policy
+    candidates = [getattr(policy, "optimizer", None), getattr(policy, "actor_optimizer", None)]
+    candidates += [getattr(policy, "critic_optimizer", None)]
+    candidates += [getattr(getattr(policy, net, None), "optimizer", None) for net in ("actor", "critic")]
+    found: list[th.optim.Optimizer] = []
+    for optimizer in candidates:
+        if isinstance(optimizer, th.optim.Optimizer) and all(optimizer is not seen for seen in found):
+            found.append(optimizer)
+    return found
+
+
+@pytest.mark.parametrize("name", [name for name in ALGOS if name != "cmaes"])  # CMA-ES has no learning rate
+def test_learning_rate_schedule(name: str) -> None:
+    """A schedule of the remaining progress given as ``learning_rate`` is followed (SB3 semantics), not just read once."""
+    model = make_model(name, learning_rate=lambda progress_remaining: 1e-3 * progress_remaining)
+    optimizers = _optimizers(model)
+    assert optimizers
+    assert all(group["lr"] == pytest.approx(1e-3) for opt in optimizers for group in opt.param_groups)
+    model.learn(4 * EPISODE)
+    for optimizer in _optimizers(model):  # looked up again: a network reset may build a new optimizer
+        for group in optimizer.param_groups:
+            assert group["lr"] <= 0.5e-3, "learning_rate schedule ignored"
+
+
+@pytest.mark.parametrize("name", ["ddpg", "cacla"])  # step-wise algorithms
+def test_several_envs(name: str) -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+
+    model = make_model(name, env=make_vec_env(make_env, n_envs=2, seed=0))
+    model.learn(2 * EPISODE)
+    assert model.num_timesteps == 2 * EPISODE
+    assert model.n_envs == 2
+    actions, _ = model.predict(model.get_env().reset(), deterministic=True)
+    assert actions.shape == (2, *model.action_space.shape)
