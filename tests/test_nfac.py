@@ -226,3 +226,21 @@ def test_unsupported_spaces_and_several_envs():
         NFAC("MlpPolicy", "CartPole-v1")
     with pytest.raises(ValueError, match="n_envs"):
         NFAC("MlpPolicy", make_vec_env(TargetEnv, n_envs=2))
+
+
+def test_options_and_numpy_hyperparameters():
+    model = NFAC(
+        "MlpPolicy",
+        TargetEnv(),
+        learning_rate=np.float32(1e-3),  # numpy scalars (e.g. from YAML/Optuna) are accepted
+        critic_learning_rate=lambda progress: 1e-3 * progress,
+        n_fitted_iterations=np.int64(2),
+        update_critic_first=False,
+        reset_critic=True,
+        update_delta_neg=True,
+        seed=0,
+    )
+    critic_optimizer = model.policy.critic_optimizer
+    model.learn(20)
+    assert model.policy.critic_optimizer is not critic_optimizer  # reset_critic re-creates V's Adam state
+    assert model.policy.critic_optimizer.param_groups[0]["lr"] < 1e-3  # critic schedule applied

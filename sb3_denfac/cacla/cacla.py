@@ -60,6 +60,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
     policy: CACLAPolicy
+    _learns_online: ClassVar[bool] = True
 
     def __init__(
         self,

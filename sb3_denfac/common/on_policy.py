@@ -13,7 +13,7 @@ r + gamma * V(s') bootstraps from it with the critic of the moment the target is
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import torch as th
@@ -210,7 +210,8 @@ def check_positive(name: str, value: float, integer: bool = False) -> None:
     """Raise a ValueError naming ``name`` unless ``value`` is a positive number (an integer if ``integer``)."""
     if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    if not integer and not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+    is_number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if not integer and not (is_number and np.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
@@ -229,6 +230,8 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
 
     policy: DeterministicActorValuePolicy  # type: ignore[assignment]
     rollout_buffer: TransitionBuffer  # type: ignore[assignment]
+    #: True if ``_on_step_transition`` learns (CACLA); NFAC only learns from the rollout in ``train``.
+    _learns_online: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -256,6 +259,10 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
         for name, lr in (("learning_rate", learning_rate), ("critic_learning_rate", critic_learning_rate)):
             if lr is not None and not callable(lr):
                 check_positive(name, lr)
+        # SB3's schedules accept Python floats only (not numpy scalars from YAML/Optuna)
+        learning_rate = learning_rate if callable(learning_rate) else float(learning_rate)
+        if critic_learning_rate is not None and not callable(critic_learning_rate):
+            critic_learning_rate = float(critic_learning_rate)
         super().__init__(
             policy,
             env,
@@ -377,16 +384,17 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
                     next_obs[idx] = infos[idx]["terminal_observation"]
                     terminals[idx] = 0.0 if infos[idx].get("TimeLimit.truncated", False) else 1.0
             rollout_buffer.add(self._last_obs, actions, means, rewards, next_obs, terminals)
-            self._on_step_transition(
-                Transitions(
-                    observations=obs_as_tensor(self._last_obs, self.device),  # type: ignore[arg-type]
-                    actions=th.as_tensor(actions, dtype=th.float32, device=self.device),
-                    behaviour_means=th.as_tensor(means, dtype=th.float32, device=self.device),
-                    rewards=th.as_tensor(rewards, dtype=th.float32, device=self.device),
-                    next_observations=obs_as_tensor(next_obs, self.device),
-                    terminals=th.as_tensor(terminals, device=self.device),
+            if self._learns_online:
+                self._on_step_transition(
+                    Transitions(
+                        observations=obs_as_tensor(self._last_obs, self.device),  # type: ignore[arg-type]
+                        actions=th.as_tensor(actions, dtype=th.float32, device=self.device),
+                        behaviour_means=th.as_tensor(means, dtype=th.float32, device=self.device),
+                        rewards=th.as_tensor(rewards, dtype=th.float32, device=self.device),
+                        next_observations=obs_as_tensor(next_obs, self.device),
+                        terminals=th.as_tensor(terminals, device=self.device),
+                    )
                 )
-            )
             self._last_obs = new_obs  # type: ignore[assignment]
             self._last_episode_starts = dones
 

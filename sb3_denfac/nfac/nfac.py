@@ -36,7 +36,11 @@ class NFAC(DeterministicOnPolicyAlgorithm):
 
     Exploration is the paper's truncated Gaussian N(mu(s), sigma^2) on the [-1, 1]-scaled action space. Batch norm
     (policy_kwargs ``batch_norm``, on by default: "NFAC+") normalises with the statistics of the whole batch during the
-    gradient steps (train mode); targets, TD errors, acting and ``predict`` use the running statistics (eval mode).
+    gradient steps (train mode); targets, TD errors, acting and ``predict`` use the running statistics (eval mode),
+    which follow the batches with policy_kwargs ``bn_momentum`` (with ``reset_critic`` and few ``critic_steps`` they
+    lag behind: raise ``bn_momentum``). A batch-normalised update needs at least two samples: a one-step rollout, or a
+    single positive TD error without ``update_delta_neg``, skips that update. Episodes that end on a time limit are
+    bootstrapped from V of their last observation; only true terminations give y = r.
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
     :param env: environment or its registered id; a single environment (episode-wise updates).
@@ -146,7 +150,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             if self.reset_critic:
                 self.policy.reset_critic()
                 self._update_learning_rates()
-            self.policy.critic.train()
+            self.policy.critic.train()  # batch statistics of the whole batch
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
                 self._gradient_step(loss, self.policy.critic, self.policy.critic_optimizer)
