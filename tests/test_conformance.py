@@ -25,9 +25,11 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 import sb3_denfac  # noqa: F401  (registers the paper envs)
 
 EPISODE = 20  # steps per episode of every test env
-ALGOS = ["denfac", "ddpg", "nfac", "cacla", "cmaes"]
+#: "denfac_plain" is DENFAC on its plain (autograd) update path; "denfac" takes the default (fast when possible).
+ALGOS = ["denfac", "denfac_plain", "ddpg", "nfac", "cacla", "cmaes"]
 CLASS_PATHS = {
     "denfac": "sb3_denfac.denfac:DENFAC",
+    "denfac_plain": "sb3_denfac.denfac:DENFAC",
     "ddpg": "sb3_denfac.ddpg:DDPG",
     "nfac": "sb3_denfac.nfac:NFAC",
     "cacla": "sb3_denfac.cacla:CACLA",
@@ -36,6 +38,14 @@ CLASS_PATHS = {
 #: Tiny configurations: every update is a handful of gradient steps on networks of a few units.
 TINY_KWARGS: dict[str, dict[str, Any]] = {
     "denfac": dict(
+        buffer_size=5 * EPISODE,
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
+    "denfac_plain": dict(
+        update_path="plain",
         buffer_size=5 * EPISODE,
         n_fitted_iterations=1,
         critic_steps=2,
@@ -57,9 +67,9 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
     "cacla": dict(n_steps=EPISODE, bn_window=4, policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4]))),
     "cmaes": dict(population_size=2, policy_kwargs=dict(net_arch=[4])),
 }
-OFF_POLICY = ["denfac", "ddpg"]
+OFF_POLICY = ["denfac", "denfac_plain", "ddpg"]
 #: predict(deterministic=False) samples the truncated Gaussian exploration policy.
-EXPLORING_PREDICT = ["denfac", "nfac", "cacla"]
+EXPLORING_PREDICT = ["denfac", "denfac_plain", "nfac", "cacla"]
 
 
 def algo_class(name: str) -> type[BaseAlgorithm]:
@@ -511,7 +521,7 @@ def test_ddpg_train_freq(train_freq: Any) -> None:
 @pytest.mark.parametrize("name", ALGOS)
 def test_env_id_string(name: str) -> None:
     """An env id is made by SB3 (Pendulum-v1: 200-step episodes)."""
-    overrides = dict(buffer_size=200) if name == "denfac" else {}
+    overrides = dict(buffer_size=200) if name.startswith("denfac") else {}
     model = make_model(name, env="Pendulum-v1", **overrides)
     model.learn(10)
     assert model.num_timesteps >= 10

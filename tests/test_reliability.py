@@ -25,7 +25,7 @@ from test_conformance import ALGOS, EPISODE, OFF_POLICY, algo_class, make_env, m
 from sb3_denfac.common.checks import InputChecksMixin, wrap_check_finite
 
 #: Algorithms that learn from whole episodes of a single environment.
-EPISODE_WISE = ["denfac", "nfac", "cmaes"]
+EPISODE_WISE = ["denfac", "denfac_plain", "nfac", "cmaes"]
 
 
 class DiscreteActionEnv(gym.Env):
@@ -302,7 +302,7 @@ def test_corrupted_zip(tmp_path: pathlib.Path, name: str) -> None:
 
 
 #: A zip of another algorithm with another policy class (NFAC and CACLA share theirs: their zips are interchangeable).
-FOREIGN = {"denfac": "ddpg", "ddpg": "nfac", "nfac": "denfac", "cacla": "cmaes", "cmaes": "cacla"}
+FOREIGN = {"denfac": "ddpg", "denfac_plain": "nfac", "ddpg": "nfac", "nfac": "denfac", "cacla": "cmaes", "cmaes": "cacla"}
 
 
 @pytest.mark.parametrize("name", ALGOS)
@@ -370,3 +370,29 @@ def test_checkpoint_callback_resume(tmp_path: pathlib.Path, name: str) -> None:
         assert resumed.replay_buffer.size() >= 2 * EPISODE - 1
     resumed.learn(total - resumed.num_timesteps, reset_num_timesteps=False)
     assert resumed.num_timesteps == uninterrupted.num_timesteps == total
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_resume_is_exact(tmp_path: pathlib.Path, name: str) -> None:
+    """Everything that training depends on is saved: from the same seed and a fresh env, a loaded copy (and its replay
+    buffer) continues exactly as the original model (weights, optimizer states, batch-norm statistics, search state)."""
+    off_policy = name in OFF_POLICY
+    model = make_model(name, seed=2)
+    model.learn(2 * EPISODE)
+    model.save(tmp_path / "model.zip")
+    if off_policy:
+        model.save_replay_buffer(tmp_path / "buffer.pkl")
+    loaded = algo_class(name).load(tmp_path / "model.zip", env=make_env())
+    if off_policy:
+        loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    model.set_env(make_env(), force_reset=True)
+    for copy in (model, loaded):
+        copy.set_random_seed(7)
+        copy.learn(2 * EPISODE, reset_num_timesteps=False)
+    assert loaded.num_timesteps == model.num_timesteps == 4 * EPISODE
+    params, loaded_params = model.get_parameters(), loaded.get_parameters()
+    for object_name, state in params.items():
+        if "optim" in object_name:
+            continue
+        for key, value in state.items():
+            assert th.equal(value, loaded_params[object_name][key]), f"{object_name}.{key} differs after resume"
