@@ -8,6 +8,7 @@ update. ``tests/test_reliability.py`` imports ``ALGOS``, ``algo_class``, ``make_
 from __future__ import annotations
 
 import importlib
+import io
 import pathlib
 from copy import deepcopy
 from typing import Any
@@ -18,7 +19,13 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback, EvalCallback
+from stable_baselines3.common.callbacks import (
+    BaseCallback,
+    CallbackList,
+    CheckpointCallback,
+    EvalCallback,
+    StopTrainingOnMaxEpisodes,
+)
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
@@ -450,6 +457,28 @@ def test_callback_stops_training(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", ALGOS)
+def test_stop_on_max_episodes(name: str) -> None:
+    """SB3's StopTrainingOnMaxEpisodes reads ``locals["dones"]``: every training loop must expose it."""
+    model = make_model(name)
+    model.learn(10 * EPISODE, callback=StopTrainingOnMaxEpisodes(max_episodes=2))
+    assert model.num_timesteps == 2 * EPISODE
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_save_load_file_object(name: str) -> None:
+    model = make_model(name, seed=0)
+    model.learn(EPISODE)
+    observations = sample_observations(model.observation_space)
+    buffer = io.BytesIO()
+    model.save(buffer)
+    buffer.seek(0)
+    loaded = algo_class(name).load(buffer, device="cpu")
+    np.testing.assert_allclose(
+        model.predict(observations, deterministic=True)[0], loaded.predict(observations, deterministic=True)[0], atol=1e-6
+    )
+
+
+@pytest.mark.parametrize("name", ALGOS)
 def test_progress_bar(name: str) -> None:
     model = make_model(name)
     model.learn(2 * EPISODE, progress_bar=True)
@@ -458,9 +487,9 @@ def test_progress_bar(name: str) -> None:
 
 # ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
 class Float64ActionEnv(gym.Env):
-    """Observation Box(-1, 1, (2,)) (float32 or float64, as HalfCheetah), action Box(-3, 3, (2,)) float64; reward -|a|^2."""
+    """Observation Box(-1, 1, (2,)) (float32 or float64, as HalfCheetah), action Box([0, -1], [4, 3]) float64."""
 
-    action_space = spaces.Box(-3.0, 3.0, shape=(2,), dtype=np.float64)
+    action_space = spaces.Box(np.array([0.0, -1.0]), np.array([4.0, 3.0]), dtype=np.float64)  # asymmetric bounds
 
     def __init__(self, obs_dtype: type = np.float32) -> None:
         self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=obs_dtype)
@@ -586,3 +615,18 @@ def test_several_envs(name: str) -> None:
     assert model.n_envs == 2
     actions, _ = model.predict(model.get_env().reset(), deterministic=True)
     assert actions.shape == (2, *model.action_space.shape)
+
+
+def test_ddpg_target_networks_copy_batch_norm_statistics() -> None:
+    """As SB3's TD3 (GH#996): running statistics are copied to the targets, weights are Polyak-averaged."""
+    model = make_model("ddpg", tau=0.1)
+    model.learn(2 * EPISODE)
+    policy = model.policy
+    for online, target in ((policy.actor, policy.actor_target), (policy.critic, policy.critic_target)):
+        online_stats, target_stats = batch_norm_buffers(online), batch_norm_buffers(target)
+        assert online_stats
+        for key, value in online_stats.items():
+            assert th.equal(value, target_stats[key]), key
+        online_weights = th.cat([p.flatten() for p in online.parameters()])
+        target_weights = th.cat([p.flatten() for p in target.parameters()])
+        assert not th.equal(online_weights, target_weights)  # tau < 1: the targets lag
