@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 import gymnasium as gym
 import optuna
 import pytest
+from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from sb3_denfac import zoo, zoo_samplers
@@ -135,6 +137,18 @@ def test_every_yaml_entry_validates(path: Path) -> None:
     config = zoo.validate_config_file(path, path.stem)
     for env_id in zoo.PACKAGE_ENV_IDS:
         assert env_id in config, f"{path.name} has no entry for {env_id}"
+
+
+@pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)
+def test_every_yaml_entry_builds_a_model(path: Path, tmp_path: Path) -> None:
+    """The zoo's own ExperimentManager turns every entry into a model (values, not only keys, are usable)."""
+    for env_id in zoo.PACKAGE_ENV_IDS:
+        manager = ExperimentManager(
+            argparse.Namespace(), path.stem, env_id, str(tmp_path), eval_freq=-1, config=str(path), seed=0, verbose=0
+        )
+        model, _ = manager.setup_experiment()
+        assert isinstance(model, zoo.algorithm_class(path.stem))
+        model.get_env().close()
 
 
 def test_paper_figure5_values() -> None:
