@@ -63,8 +63,8 @@ def _open_for_read(path: Any) -> Any:
     """``path`` as SB3's ``load`` resolves it (a missing ``.zip`` suffix is added), or the file object itself."""
     if isinstance(path, (str, pathlib.Path)):
         path = pathlib.Path(path)
-        if not path.exists() and path.with_suffix(".zip").exists():
-            path = path.with_suffix(".zip")
+        if not path.exists():  # as SB3's open_path: "model" -> "model.zip"
+            path = pathlib.Path(f"{path}.zip")
     return path
 
 
