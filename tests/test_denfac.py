@@ -222,3 +222,48 @@ def test_learns_target_action():
     model.learn(300)
     end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
     assert start > 0.4 and end < 0.15, (start, end)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(),
+        dict(reset_critic=True, weighting="retrace_next_state_quirk"),
+        dict(inverting_gradients=False, batch_size=32, reset_actor=False),
+    ],
+)
+def test_fast_and_plain_paths_agree(kwargs):
+    """Speed never changes the algorithm: same seed -> same losses, parameters, BN statistics and Adam moments.
+
+    A moderate step size keeps the comparison meaningful: with beta1 = 0 Adam's first steps are lr * sign(g), so at
+    large rates float rounding in near-zero gradient components is amplified (both paths are then equally valid).
+    """
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    models = {}
+    for path in ("plain", "fast"):
+        models[path] = make_model(env, update_path=path, learning_rate=0.01, **kwargs).learn(100)
+    plain, fast = models["plain"], models["fast"]
+    for key in ("train/critic_loss", "train/actor_objective", "train/q_mean", "train/importance_weight_mean"):
+        assert plain.logger.name_to_value[key] == pytest.approx(fast.logger.name_to_value[key], rel=1e-4, abs=1e-5), key
+    fast_state = fast.policy.state_dict()
+    for name, value in plain.policy.state_dict().items():
+        th.testing.assert_close(fast_state[name], value, rtol=1e-4, atol=1e-5, msg=name)
+    for net in ("actor", "critic"):
+        plain_opt = getattr(plain, net).optimizer.state_dict()["state"]
+        fast_opt = getattr(fast, net).optimizer.state_dict()["state"]
+        assert plain_opt.keys() == fast_opt.keys()
+        for i in plain_opt:
+            assert float(plain_opt[i]["step"]) == float(fast_opt[i]["step"])
+            th.testing.assert_close(fast_opt[i]["exp_avg_sq"], plain_opt[i]["exp_avg_sq"], rtol=1e-3, atol=1e-9)
+    # A plain update after fast ones continues from the same Adam state (paths are interchangeable mid-training).
+    fast.update_path = "plain"
+    fast.learn(50, reset_num_timesteps=False)
+    assert np.isfinite(fast.logger.name_to_value["train/critic_loss"])
+
+
+def test_update_path_errors():
+    with pytest.raises(ValueError, match="update_path"):
+        make_model(update_path="turbo")
+    model = make_model(update_path="fast", policy_kwargs=dict(optimizer_class=th.optim.SGD))
+    with pytest.raises(ValueError, match="update_path='fast'"):
+        model.learn(60)

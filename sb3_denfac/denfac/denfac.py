@@ -233,8 +233,9 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
             critic_learning_rate=self.critic_learning_rate,
         )
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
-        optimizer_kwargs.setdefault("betas", self.adam_betas)
-        optimizer_kwargs.setdefault("eps", self.adam_eps)
+        if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
+            optimizer_kwargs.setdefault("betas", self.adam_betas)
+            optimizer_kwargs.setdefault("eps", self.adam_eps)
         self.policy_kwargs["optimizer_kwargs"] = optimizer_kwargs
         self.policy_kwargs.setdefault("bn_momentum", None)
         super()._setup_model()
