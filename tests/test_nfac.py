@@ -233,6 +233,7 @@ def test_options_and_numpy_hyperparameters():
         "MlpPolicy",
         TargetEnv(),
         learning_rate=np.float32(1e-3),  # numpy scalars (e.g. from YAML/Optuna) are accepted
+        actor_learning_rate=2e-3,  # takes precedence over learning_rate, as in DENFAC
         critic_learning_rate=lambda progress: 1e-3 * progress,
         n_fitted_iterations=np.int64(2),
         update_critic_first=False,
@@ -244,3 +245,4 @@ def test_options_and_numpy_hyperparameters():
     model.learn(20)
     assert model.policy.critic_optimizer is not critic_optimizer  # reset_critic re-creates V's Adam state
     assert model.policy.critic_optimizer.param_groups[0]["lr"] < 1e-3  # critic schedule applied
+    assert model.policy.actor_optimizer.param_groups[0]["lr"] == 2e-3

@@ -42,8 +42,9 @@ class CACLA(DeterministicOnPolicyAlgorithm):
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.cacla.policies.CACLAPolicy`).
     :param env: environment or its registered id (one or several environments).
-    :param learning_rate: actor learning rate alpha_a (float or schedule).
-    :param critic_learning_rate: critic learning rate alpha_c; None means ``learning_rate``.
+    :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
+    :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
+    :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param n_steps: steps per environment per rollout: the logging period (learning is per step).
     :param gamma: discount factor.
     :param sigma: exploration standard deviation in the scaled action space (paper: 0.05).
@@ -67,6 +68,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         policy: str | type[CACLAPolicy],
         env: GymEnv | str,
         learning_rate: float | Schedule = 1e-3,
+        actor_learning_rate: float | Schedule | None = None,
         critic_learning_rate: float | Schedule | None = None,
         n_steps: int = 100,
         gamma: float = 0.99,
@@ -89,6 +91,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
             policy,
             env,
             learning_rate=learning_rate,
+            actor_learning_rate=actor_learning_rate,
             critic_learning_rate=critic_learning_rate,
             n_steps=n_steps,
             gamma=gamma,

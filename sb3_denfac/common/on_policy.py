@@ -223,7 +223,8 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 
-    :param critic_learning_rate: alpha_c (``learning_rate`` is the actor's alpha_a); None means ``learning_rate``.
+    :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
+    :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param sigma: exploration standard deviation in the [-1, 1]-scaled action space (paper: 0.05).
     :param max_grad_norm: clip of the global gradient L2 norm of each step (authors' code: 10); None disables it.
     """
@@ -238,6 +239,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
         policy: str | type[DeterministicActorValuePolicy],
         env: GymEnv | str,
         learning_rate: float | Schedule,
+        actor_learning_rate: float | Schedule | None,
         critic_learning_rate: float | Schedule | None,
         n_steps: int,
         gamma: float,
@@ -256,13 +258,14 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
             raise ValueError(f"gamma must lie in [0, 1], got {gamma!r}")
         if max_grad_norm is not None:
             check_positive("max_grad_norm", max_grad_norm)
-        for name, lr in (("learning_rate", learning_rate), ("critic_learning_rate", critic_learning_rate)):
+        rates = dict(
+            learning_rate=learning_rate, actor_learning_rate=actor_learning_rate, critic_learning_rate=critic_learning_rate
+        )
+        for name, lr in rates.items():
             if lr is not None and not callable(lr):
                 check_positive(name, lr)
-        # SB3's schedules accept Python floats only (not numpy scalars from YAML/Optuna)
-        learning_rate = learning_rate if callable(learning_rate) else float(learning_rate)
-        if critic_learning_rate is not None and not callable(critic_learning_rate):
-            critic_learning_rate = float(critic_learning_rate)
+                rates[name] = float(lr)  # SB3's schedules accept Python floats only (not numpy scalars from YAML/Optuna)
+        learning_rate = rates["learning_rate"]  # type: ignore[assignment]
         super().__init__(
             policy,
             env,
@@ -284,7 +287,8 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
             _init_setup_model=False,
             supported_action_spaces=None,  # checked below with a ValueError
         )
-        self.critic_learning_rate = critic_learning_rate
+        self.actor_learning_rate = rates["actor_learning_rate"]
+        self.critic_learning_rate = rates["critic_learning_rate"]
         self.sigma = sigma
         if self.env is not None:  # load() builds the model without an env
             self._check_spaces()
@@ -303,14 +307,15 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
-        critic_lr = self.learning_rate if self.critic_learning_rate is None else self.critic_learning_rate
-        self.critic_lr_schedule = FloatSchedule(critic_lr)
+        # alpha_a and alpha_c: each network's own rate, else SB3's learning_rate
+        self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate or self.learning_rate)
+        self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate or self.learning_rate)
         self.set_random_seed(self.seed)
         self.rollout_buffer = TransitionBuffer()
         self.policy = self.policy_class(  # type: ignore[assignment]
             self.observation_space,
             self.action_space,
-            self.lr_schedule,
+            self.actor_lr_schedule,
             critic_lr_schedule=self.critic_lr_schedule,
             sigma=self.sigma,
             **self.policy_kwargs,
@@ -324,9 +329,9 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
     def _update_learning_rates(self) -> None:
         """Apply the alpha_a and alpha_c schedules (SB3's ``_update_learning_rate`` handles a single schedule)."""
         progress = self._current_progress_remaining
-        self.logger.record("train/learning_rate", self.lr_schedule(progress))
+        self.logger.record("train/actor_learning_rate", self.actor_lr_schedule(progress))
         self.logger.record("train/critic_learning_rate", self.critic_lr_schedule(progress))
-        update_learning_rate(self.policy.actor_optimizer, self.lr_schedule(progress))
+        update_learning_rate(self.policy.actor_optimizer, self.actor_lr_schedule(progress))
         update_learning_rate(self.policy.critic_optimizer, self.critic_lr_schedule(progress))
 
     def _gradient_step(self, loss: th.Tensor, net: nn.Module, optimizer: th.optim.Optimizer) -> None:

@@ -44,8 +44,9 @@ class NFAC(DeterministicOnPolicyAlgorithm):
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
     :param env: environment or its registered id; a single environment (episode-wise updates).
-    :param learning_rate: actor learning rate alpha_a (float or schedule).
-    :param critic_learning_rate: critic learning rate alpha_c; None means ``learning_rate``.
+    :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
+    :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
+    :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param n_episodes: episodes collected per update (authors: 1).
     :param n_fitted_iterations: K, fitted rounds of the critic per update (authors' ``number_fitted_iteration``).
     :param critic_steps: full-batch Adam steps per fitted round (authors' ``stoch_iter``).
@@ -73,6 +74,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         policy: str | type[NFACPolicy],
         env: GymEnv | str,
         learning_rate: float | Schedule = 1e-3,
+        actor_learning_rate: float | Schedule | None = None,
         critic_learning_rate: float | Schedule | None = None,
         n_episodes: int = 1,
         n_fitted_iterations: int = 10,
@@ -103,6 +105,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             policy,
             env,
             learning_rate=learning_rate,
+            actor_learning_rate=actor_learning_rate,
             critic_learning_rate=critic_learning_rate,
             n_steps=1,  # unused: rollouts are whole episodes
             gamma=gamma,
@@ -148,8 +151,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             self.policy.set_training_mode(False)
             targets = self._td_targets(data)  # computed before the optional reset, as the authors
             if self.reset_critic:
-                self.policy.reset_critic()
-                self._update_learning_rates()
+                self.policy.reset_critic()  # new weights, BN statistics and Adam state; same learning rate
             self.policy.critic.train()  # batch statistics of the whole batch
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
