@@ -1,0 +1,317 @@
+"""Compute cost of one DENFAC end-of-episode update (issue 7), against a reference, the arithmetic floor and DDPG.
+
+For each setting (paper's Acrobot and Half-Cheetah sizes) it times, in the same run and with the same thread count:
+
+(a) ``reference``: a straightforward PyTorch implementation of the same update (Algorithm 1: modules and Adam rebuilt
+    at every reset, autograd, ``clip_grad_norm_``), kept in this file;
+(b) ``floor``: the update's matrix-multiply FLOPs divided by the GFLOP/s of a large matmul measured in this run;
+(c) ``ddpg``: SB3 DDPG's training cost for the same amount of data, i.e. one episode of ``episode_steps`` transitions
+    with one gradient step of batch 64 per transition (and the paper's 8 additional updates: x9, computed);
+plus DENFAC's own update with ``update_path="fast"`` and ``"plain"``. Medians over repeats; results with ratios go to
+``benchmarks/results/update_cost.{md,json}``.
+
+Usage: ``python benchmarks/update_cost.py [--repeats 5] [--threads 1]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from torch import nn
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+SETTINGS = {
+    # Paper Figure 5 + section 4: Acrobot (4-d state, 1 action, actor 5, D=6000, critic reset, no inverting gradients)
+    "acrobot": dict(obs_dim=4, action_dim=1, pi=[5], qf=[50, 7], buffer_size=6000, reset_critic=True, inverting=False),
+    # Half-Cheetah sizes (gymnasium's 17-d state, 6 actions, actor 20-10, D=3000, inverting gradients)
+    "half_cheetah": dict(
+        obs_dim=17, action_dim=6, pi=[20, 10], qf=[50, 7], buffer_size=3000, reset_critic=False, inverting=True
+    ),
+}
+K, CRITIC_STEPS, G, SIGMA, GAMMA, LR, MAX_NORM = 10, 10, 25, 0.05, 0.99, 0.1, 10.0
+EPISODE_STEPS = 500
+
+
+class RandomEnv(gym.Env):
+    def __init__(self, obs_dim: int, action_dim: int):
+        self.observation_space = spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (action_dim,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.observation_space.sample() * 0, {}
+
+    def step(self, action):
+        return np.zeros(self.observation_space.shape, np.float32), 0.0, False, False, {}
+
+
+def random_data(n: int, obs_dim: int, action_dim: int, seed: int = 0) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    f = np.float32
+    return dict(
+        obs=rng.normal(size=(n, obs_dim)).astype(f),
+        next_obs=rng.normal(size=(n, obs_dim)).astype(f),
+        actions=rng.uniform(-1, 1, (n, action_dim)).astype(f),
+        means=rng.uniform(-1, 1, (n, action_dim)).astype(f),
+        rewards=rng.normal(size=(n, 1)).astype(f),
+        dones=(rng.random((n, 1)) < 0.01).astype(f),
+    )
+
+
+def median_time(fn, repeats: int) -> float:
+    fn()  # warm-up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+# ----- (a) straightforward reference implementation ------------------------------------------------------------------
+def reference_mlp(in_dim: int, out_dim: int, hidden: list[int]) -> nn.Sequential:
+    sizes = [in_dim, *hidden, out_dim]
+    layers: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        if i < len(sizes) - 2:
+            layers += [nn.BatchNorm1d(sizes[i]), nn.Linear(sizes[i], sizes[i + 1]), nn.LeakyReLU(0.01)]
+        else:
+            layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+    for m in layers:
+        if isinstance(m, nn.Linear):
+            nn.init.normal_(m.weight, std=0.01)
+            nn.init.zeros_(m.bias)
+    return nn.Sequential(*layers)
+
+
+def truncnorm_logp(a: th.Tensor, mu: th.Tensor) -> th.Tensor:
+    mu = mu.clamp(-1 - 3 * SIGMA, 1 + 3 * SIGMA).double()
+    normal = th.distributions.Normal(mu, SIGMA)
+    mass = normal.cdf(th.ones_like(mu)) - normal.cdf(-th.ones_like(mu))
+    return (normal.log_prob(a.double()) - mass.log()).sum(1).float()
+
+
+def reference_update(data: dict[str, th.Tensor], cfg: dict, nets: dict) -> None:
+    s, a, s2, r, d, mu_b = data["obs"], data["actions"], data["next_obs"], data["rewards"], data["dones"], data["means"]
+    obs_dim, act_dim = cfg["obs_dim"], cfg["action_dim"]
+    actor, critic = nets["actor"], nets["critic"]
+    critic_opt = nets.setdefault("critic_opt", th.optim.Adam(critic.parameters(), lr=LR, betas=(0.0, 0.999)))
+    logp_b = truncnorm_logp(a, mu_b)
+    for _ in range(K):
+        actor.eval()
+        critic.eval()
+        with th.no_grad():
+            q_target = r + GAMMA * (1 - d) * critic(th.cat([s2, actor(s2).clamp(-1, 1)], 1))
+            c = th.exp(th.clamp(truncnorm_logp(a, actor(s)) - logp_b, max=0)).unsqueeze(1)
+        if cfg["reset_critic"]:
+            critic = reference_mlp(obs_dim + act_dim, 1, cfg["qf"])
+            critic_opt = th.optim.Adam(critic.parameters(), lr=LR, betas=(0.0, 0.999))
+        critic.train()
+        for _ in range(CRITIC_STEPS):
+            loss = (c * (critic(th.cat([s, a], 1)) - q_target) ** 2).mean()
+            critic_opt.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(critic.parameters(), MAX_NORM)
+            critic_opt.step()
+        actor = reference_mlp(obs_dim, act_dim, cfg["pi"])
+        actor_opt = th.optim.Adam(actor.parameters(), lr=LR, betas=(0.0, 0.999))
+        actor.train()
+        critic.eval()
+        for _ in range(G):
+            pi = actor(s)
+            q = critic(th.cat([s, pi], 1))
+            actor_opt.zero_grad()
+            if cfg["inverting"]:
+                (dq,) = th.autograd.grad(q.mean(), pi)
+                dq = th.where(dq > 0, dq * (1 - pi.detach()) / 2, dq * (pi.detach() + 1) / 2)
+                pi.backward(-dq)
+            else:
+                (-q.mean()).backward()
+            nn.utils.clip_grad_norm_(actor.parameters(), MAX_NORM)
+            actor_opt.step()
+    nets["actor"], nets["critic"], nets["critic_opt"] = actor, critic, critic_opt
+
+
+# ----- (b) arithmetic floor ------------------------------------------------------------------------------------------
+def linear_flops(n: int, sizes: list[int], weight_grad: bool, input_grad_from: int | None) -> float:
+    """Matmul FLOPs of a forward (+ backward) pass of an MLP with layer sizes ``sizes`` over n samples."""
+    flops = 0.0
+    for i in range(len(sizes) - 1):
+        mac = n * sizes[i] * sizes[i + 1]
+        flops += 2 * mac  # forward
+        if weight_grad:
+            flops += 2 * mac
+        if input_grad_from is not None and i >= input_grad_from:
+            flops += 2 * mac
+    return flops
+
+
+def update_flops(cfg: dict) -> float:
+    n, o, a = cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]
+    actor, critic = [o, *cfg["pi"], a], [o + a, *cfg["qf"], 1]
+    targets = 2 * linear_flops(n, actor, False, None) + linear_flops(n, critic, False, None)
+    critic_step = linear_flops(n, critic, True, 1)
+    # actor step: actor forward + backward, critic forward + d/d action (first layer: action columns only)
+    actor_step = linear_flops(n, actor, True, 1) + linear_flops(n, critic, False, 1) + 2 * n * a * cfg["qf"][0]
+    return K * (targets + CRITIC_STEPS * critic_step + G * actor_step)
+
+
+def matmul_gflops(size: int = 1024, repeats: int = 10) -> float:
+    x, y = th.randn(size, size), th.randn(size, size)
+    t = median_time(lambda: x @ y, repeats)
+    return 2 * size**3 / t / 1e9
+
+
+# ----- (c) SB3 DDPG ---------------------------------------------------------------------------------------------------
+def ddpg_episode_time(cfg: dict, repeats: int) -> float:
+    from stable_baselines3 import DDPG
+    from stable_baselines3.common.logger import configure
+
+    env = RandomEnv(cfg["obs_dim"], cfg["action_dim"])
+    model = DDPG(
+        "MlpPolicy",
+        env,
+        buffer_size=cfg["buffer_size"],
+        batch_size=64,
+        learning_starts=0,
+        policy_kwargs=dict(net_arch=dict(pi=cfg["pi"], qf=cfg["qf"])),
+        seed=0,
+    )
+    model.set_logger(configure(None, []))
+    data = random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"])
+    rb = model.replay_buffer
+    rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
+    rb.rewards[:, 0], rb.dones[:, 0], rb.full = data["rewards"][:, 0], data["dones"][:, 0], True
+    return median_time(lambda: model.train(gradient_steps=EPISODE_STEPS, batch_size=64), repeats)
+
+
+def denfac_update_time(cfg: dict, path: str, repeats: int) -> float:
+    from stable_baselines3.common.logger import configure
+
+    from sb3_denfac.denfac import DENFAC
+
+    env = gym.wrappers.TimeLimit(RandomEnv(cfg["obs_dim"], cfg["action_dim"]), max_episode_steps=EPISODE_STEPS)
+    model = DENFAC(
+        "MlpPolicy",
+        env,
+        buffer_size=cfg["buffer_size"],
+        n_fitted_iterations=K,
+        critic_steps=CRITIC_STEPS,
+        actor_steps=G,
+        reset_critic=cfg["reset_critic"],
+        inverting_gradients=cfg["inverting"],
+        learning_rate=LR,
+        sigma=SIGMA,
+        gamma=GAMMA,
+        update_path=path,
+        policy_kwargs=dict(net_arch=dict(pi=cfg["pi"], qf=cfg["qf"])),
+        seed=0,
+    )
+    model.set_logger(configure(None, []))
+    data = random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"])
+    rb = model.replay_buffer
+    rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
+    rb.behaviour_means[:, 0], rb.rewards[:, 0], rb.dones[:, 0] = data["means"], data["rewards"][:, 0], data["dones"][:, 0]
+    rb.full = True
+    return median_time(model._update, repeats)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--settings", nargs="+", default=list(SETTINGS))
+    args = parser.parse_args()
+    th.set_num_threads(args.threads)
+    th.manual_seed(0)
+    results: dict = dict(
+        meta=dict(
+            threads=args.threads,
+            repeats=args.repeats,
+            torch=th.__version__,
+            K=K,
+            critic_steps=CRITIC_STEPS,
+            G=G,
+            machine=f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores (shared with other jobs)",
+            load_average=os.getloadavg(),
+        ),
+        settings={},
+    )
+    for name in args.settings:
+        cfg = SETTINGS[name]
+        gflops_before = matmul_gflops()
+        fast = denfac_update_time(cfg, "fast", args.repeats)
+        plain = denfac_update_time(cfg, "plain", max(1, args.repeats // 2))
+        data = {k: th.as_tensor(v) for k, v in random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]).items()}
+        nets = dict(
+            actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
+            critic=reference_mlp(cfg["obs_dim"] + cfg["action_dim"], 1, cfg["qf"]),
+        )
+        reference = median_time(lambda d=data, c=cfg, n=nets: reference_update(d, c, n), max(1, args.repeats // 2))
+        ddpg = ddpg_episode_time(cfg, max(1, args.repeats // 2))
+        gflops = max(gflops_before, matmul_gflops())
+        flops = update_flops(cfg)
+        floor = flops / (gflops * 1e9)
+        results["settings"][name] = dict(
+            config=cfg,
+            update_gflop=flops / 1e9,
+            matmul_gflops_per_s=gflops,
+            floor_s=floor,
+            fast_s=fast,
+            plain_s=plain,
+            reference_s=reference,
+            ddpg_episode_s=ddpg,
+            ddpg_episode_with_8_additional_updates_s=9 * ddpg,
+            speedup_vs_reference=reference / fast,
+            speedup_vs_plain=plain / fast,
+            fast_over_floor=fast / floor,
+            fast_over_ddpg_episode=fast / ddpg,
+        )
+        print(name, json.dumps(results["settings"][name], indent=1), flush=True)
+    results["meta"]["load_average_end"] = os.getloadavg()
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "update_cost.json").write_text(json.dumps(results, indent=1))
+    lines = [
+        "# Cost of one DENFAC update (K=10, critic_steps=10, G=25, full batch)",
+        "",
+        f"{results['meta']['machine']}; torch {th.__version__}, {args.threads} thread(s); medians of {args.repeats} "
+        f"(fast) / {max(1, args.repeats // 2)} (others) repeats; load average {results['meta']['load_average'][0]:.1f} "
+        f"at start, {results['meta']['load_average_end'][0]:.1f} at end.",
+        "",
+        "| setting | D | fast (s) | plain (s) | reference (s) | floor (s) | GFLOP/update | matmul GFLOP/s | "
+        "reference / fast | fast / floor | DDPG episode (s) | DDPG x9 (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, r in results["settings"].items():
+        lines.append(
+            f"| {name} | {r['config']['buffer_size']} | {r['fast_s']:.3f} | {r['plain_s']:.3f} | {r['reference_s']:.3f} | "
+            f"{r['floor_s']:.3f} | {r['update_gflop']:.2f} | {r['matmul_gflops_per_s']:.1f} | "
+            f"{r['speedup_vs_reference']:.1f}x | {r['fast_over_floor']:.1f}x | {r['ddpg_episode_s']:.3f} | "
+            f"{r['ddpg_episode_with_8_additional_updates_s']:.3f} |"
+        )
+    lines += [
+        "",
+        "- fast / plain: DENFAC's `update_path`; reference: straightforward PyTorch in this file (modules and Adam "
+        "rebuilt at resets, autograd).",
+        "- floor: matmul FLOPs of the update (forward, weight and input gradients; elementwise work not counted) / GFLOP/s "
+        "of a 1024x1024 float32 matmul measured in the same run.",
+        f"- DDPG: SB3 DDPG `train()` for one {EPISODE_STEPS}-step episode (one batch-64 gradient step per transition, "
+        "same networks without batch norm); x9 = with the paper's 8 additional updates per step.",
+        "- Targets (issue 7): reference / fast >= 5x and fast / floor <= 4x.",
+    ]
+    (RESULTS / "update_cost.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
