@@ -133,6 +133,9 @@ def test_several_envs_and_save_load(tmp_path):
         loaded.policy.actor_optimizer.state_dict()["state"].keys() == model.policy.actor_optimizer.state_dict()["state"].keys()
     )
     assert loaded.bn_window == 32 and loaded.n_steps == 10
+    # the window of recent states behind the BN statistics is saved too: a resumed run continues exactly
+    assert len(loaded._bn_states) == len(model._bn_states) == 30
+    assert all(np.array_equal(a, b) for a, b in zip(loaded._bn_states, model._bn_states, strict=True))
     loaded.learn(20, reset_num_timesteps=False)
     assert loaded.num_timesteps == 80
 

@@ -111,12 +111,13 @@ class CACLA(DeterministicOnPolicyAlgorithm):
 
     def _setup_model(self) -> None:
         super()._setup_model()
-        self._bn_states: deque[th.Tensor] = deque(maxlen=self.bn_window)
+        # States of the last bn_window steps (numpy, saved with the model so that a resumed run continues exactly)
+        self._bn_states: deque[np.ndarray] = deque(getattr(self, "_bn_states", ()), maxlen=self.bn_window)
         self._batch_norm = has_batch_norm(self.policy)
         self._reset_step_stats()
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_bn_states", "_step_stats"]
+        return [*super()._excluded_save_params(), "_step_stats"]
 
     def _reset_step_stats(self) -> None:
         self._step_stats: dict[str, list[float]] = {"critic_loss": [], "actor_loss": [], "positive": [], "time": []}
@@ -127,7 +128,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
     @th.no_grad()
     def refresh_bn_statistics(self) -> None:
         """Update the running statistics of every BN layer from the states of the last ``bn_window`` steps."""
-        states = th.cat(list(self._bn_states))
+        states = th.as_tensor(np.concatenate(self._bn_states), device=self.device)
         if len(states) < 2:
             return
         set_bn_training_mode(self.policy, True)
@@ -140,7 +141,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         start = time.perf_counter()
         self.policy.set_training_mode(False)
         if self._batch_norm:
-            self._bn_states.append(transitions.observations)
+            self._bn_states.append(transitions.observations.cpu().numpy())
             self.refresh_bn_statistics()
         with th.no_grad():
             next_values = self.policy.predict_values(transitions.next_observations).flatten()
