@@ -6,11 +6,13 @@ import argparse
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import gymnasium as gym
 import optuna
 import pytest
+import sqlalchemy
 from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -116,6 +118,41 @@ def test_optimize_on_sqlite_resumes_the_study(tmp_path: Path) -> None:
     trials = _study(logs, OPTIMIZE_ALGO).trials
     assert len(trials) == 3
     assert [t.params for t in trials[:2]] == [t.params for t in first]
+
+
+def test_killed_optimisation_keeps_completed_trials(tmp_path: Path) -> None:
+    """SIGKILL a tuning process after its first completed trial; rerunning the same command continues the study."""
+    logs = tmp_path / "logs"
+    argv = ["train", "--algo", OPTIMIZE_ALGO, "--env", ENV, "-n", "200", "-f", str(logs), "-optimize"]
+    argv += ["--n-evaluations", "1", "--eval-episodes", "1", "--pruner", "none", "--no-optim-plots", "--verbose", "0"]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "sb3_denfac.zoo", *argv, "--n-trials", "1000", "--seed", "1"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 180
+        completed: list[optuna.trial.FrozenTrial] = []
+        while not completed and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(1.0)
+            if not (logs / "optuna.db").exists():
+                continue
+            try:
+                completed = _study(logs, OPTIMIZE_ALGO).get_trials(states=(optuna.trial.TrialState.COMPLETE,))
+            except (KeyError, sqlalchemy.exc.OperationalError):
+                pass  # the study or its tables are being created
+    finally:
+        process.kill()
+        process.wait()
+    assert completed, "the tuning process completed no trial"
+
+    zoo.main([*argv, "--n-trials", "1", "--seed", "2"])
+    trials = _study(logs, OPTIMIZE_ALGO).get_trials(states=(optuna.trial.TrialState.COMPLETE,))
+    before = {t.number for t in completed}
+    assert before < {t.number for t in trials}
+    assert len(trials) >= len(completed) + 1
 
 
 @pytest.mark.parametrize("algo", sorted(zoo_samplers.SAMPLERS))
