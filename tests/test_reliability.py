@@ -258,6 +258,15 @@ def test_invalid_hyperparameters(name: str, kwargs: dict, match: str) -> None:
         make_model(name, **kwargs)
 
 
+@pytest.mark.parametrize("name", ALGOS)
+def test_invalid_policy_kwargs(name: str) -> None:
+    algo_class(name)
+    with pytest.raises(ValueError, match="init"):
+        make_model(name, policy_kwargs=dict(init="xavier"))
+    with pytest.raises(ValueError, match="hidden layer sizes"):
+        make_model(name, policy_kwargs=dict(net_arch=[0]))
+
+
 # ----- corrupted and foreign model files -------------------------------------------------------------------------------
 def _corrupted_copies(model_zip: pathlib.Path) -> dict[str, pathlib.Path]:
     """Truncated, random-bytes, 'data'-less and bit-flipped copies of a model zip."""
