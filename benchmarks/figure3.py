@@ -278,11 +278,14 @@ def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dic
         ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
         ray.cloudpickle.register_pickle_by_value(fa)
     ray.init(address=None if address == "local" else address, ignore_reinit_error=True)
-    remote = ray.remote(num_cpus=1)(run_one)
-    pending = [remote.remote(task) for task in tasks]
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        on_result(ray.get(done[0]))
+    try:
+        remote = ray.remote(num_cpus=1)(run_one)
+        pending = [remote.remote(task) for task in tasks]
+        while pending:  # results come back to this driver, which alone writes the files
+            done, pending = ray.wait(pending, num_returns=1)
+            on_result(ray.get(done[0]))
+    finally:
+        ray.shutdown()  # disconnects from a cluster; stops a "local" one
 
 
 def sweep(

@@ -252,8 +252,10 @@ def plot_figure3(runs: list[Run], path: Path) -> None:
                 q1, med, q3 = np.nanpercentile(best, [25, 50, 75], axis=0)
             color = colors(all_algos.index(algo) % 10)
             label = f"{algo.upper()} (n={best.shape[0]})"
-            ax.plot(x, med, color=color, label=label, lw=2 if algo == "denfac" else 1.3)
-            ax.fill_between(x, q1, q3, color=color, alpha=0.18, lw=0)
+            ax.plot(x, med, color=color, label=label, lw=2.2 if algo == "denfac" else 1.3, drawstyle="steps-post")
+            ax.fill_between(x, q1, q3, color=color, alpha=0.15, lw=0, step="post")
+        if spec.threshold is not None:
+            ax.axhline(spec.threshold, color="grey", ls=":", lw=1)
         ax.set_title(spec.label or env)
         ax.set_xlabel("episode")
         ax.set_ylabel("best registered performance")
