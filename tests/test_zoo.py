@@ -165,8 +165,11 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
         trial = study.ask()
         sampled = zoo_samplers.SAMPLERS[algo](trial, 1, 1, {})
         assert "train_freq" not in sampled
-        zoo.validate_entry(algo, {**entry, **sampled})
+        merged = {**entry, **sampled}
+        zoo.validate_entry(algo, merged)
         assert zoo_samplers.CONVERTERS[algo](trial.params) == sampled
+        kwargs = {key: value for key, value in merged.items() if key not in zoo.ZOO_KEYS}
+        zoo.algorithm_class(algo)(env=gym.make(ENV), device="cpu", **kwargs)  # the values are usable too
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)
