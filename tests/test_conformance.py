@@ -80,17 +80,8 @@ EXPLORING_PREDICT = ["denfac", "denfac_plain", "nfac", "cacla"]
 
 
 def algo_class(name: str) -> type[BaseAlgorithm]:
-    """The algorithm class; skips the test while its module has not landed yet."""
     module_name, class_name = CLASS_PATHS[name].split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as error:
-        if error.name is not None and module_name.startswith(error.name):
-            pytest.skip(f"{module_name} is not implemented yet")
-        raise
-    if not hasattr(module, class_name):
-        pytest.skip(f"{module_name}.{class_name} is not implemented yet")
-    return getattr(module, class_name)
+    return getattr(importlib.import_module(module_name), class_name)
 
 
 def make_env(episode: int = EPISODE) -> gym.Env:
@@ -127,14 +118,27 @@ def batch_norm_buffers(module: th.nn.Module) -> dict[str, th.Tensor]:
     }
 
 
+def assert_equal_nested(a: Any, b: Any, where: str = "") -> None:
+    """Exact equality of nested dicts / lists of tensors and scalars (optimizer state dicts included)."""
+    if isinstance(a, th.Tensor):
+        assert isinstance(b, th.Tensor) and th.equal(a, b), f"{where} differs"
+    elif isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), f"{where}: keys differ"
+        for key in a:
+            assert_equal_nested(a[key], b[key], f"{where}.{key}")
+    elif isinstance(a, (list, tuple)):
+        assert isinstance(b, (list, tuple)) and len(a) == len(b), f"{where}: lengths differ"
+        for index, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_equal_nested(x, y, f"{where}[{index}]")
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
 def assert_same_parameters(params_a: dict, params_b: dict) -> None:
+    """Same networks, batch-norm buffers and optimizer states."""
     assert params_a.keys() == params_b.keys()
     for object_name, state in params_a.items():
-        if "optim" in object_name:  # optimizer state layouts are not tensor dicts
-            continue
-        assert state.keys() == params_b[object_name].keys()
-        for key, value in state.items():
-            assert th.equal(value, params_b[object_name][key]), f"{object_name}.{key} differs"
+        assert_equal_nested(state, params_b[object_name], object_name)
 
 
 # ----- save / load (SB3 tests/test_save_load.py) -----------------------------------------------------------------------
