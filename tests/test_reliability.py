@@ -20,7 +20,7 @@ from stable_baselines3 import SAC, TD3
 from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecNormalize
-from test_conformance import ALGOS, EPISODE, OFF_POLICY, algo_class, make_env, make_model
+from test_conformance import ALGOS, EPISODE, OFF_POLICY, algo_class, assert_same_parameters, make_env, make_model
 
 from sb3_denfac.common.checks import InputChecksMixin, wrap_check_finite
 
@@ -399,9 +399,4 @@ def test_resume_is_exact(tmp_path: pathlib.Path, name: str) -> None:
         copy.set_random_seed(7)
         copy.learn(2 * EPISODE, reset_num_timesteps=False)
     assert loaded.num_timesteps == model.num_timesteps == 4 * EPISODE
-    params, loaded_params = model.get_parameters(), loaded.get_parameters()
-    for object_name, state in params.items():
-        if "optim" in object_name:
-            continue
-        for key, value in state.items():
-            assert th.equal(value, loaded_params[object_name][key]), f"{object_name}.{key} differs after resume"
+    assert_same_parameters(model.get_parameters(), loaded.get_parameters())
