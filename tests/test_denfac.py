@@ -265,5 +265,5 @@ def test_update_path_errors():
     with pytest.raises(ValueError, match="update_path"):
         make_model(update_path="turbo")
     model = make_model(update_path="fast", policy_kwargs=dict(optimizer_class=th.optim.SGD))
-    with pytest.raises(ValueError, match="update_path='fast'"):
+    with pytest.raises(ValueError, match="update_path=.fast. needs"):
         model.learn(60)

@@ -26,7 +26,7 @@ from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
 WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
-UPDATE_PATHS = ("auto", "fast", "plain")
+UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
 
 
 class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
@@ -85,8 +85,10 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
     :param adam_eps: Adam epsilon (authors: 1e-8)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
-    :param update_path: "auto" (default: the fast path when the policy allows it, else plain), "fast" (error if not
-        supported) or "plain" (autograd on the modules). Both compute the same update (tested); see ``fast.py``.
+    :param update_path: "auto" (default: "fast" when the policy allows it, else "plain"), "fast" (hand-written
+        flat-parameter steps, eager), "compiled" (the same steps through ``torch.compile``: fastest for long runs, but
+        the first update of a process pays a compilation of about a minute) or "plain" (autograd on the modules). All
+        compute the same update up to float rounding (tested for "fast"); see ``fast.py``.
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -337,10 +339,12 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
             return None
         layers = supported_networks(self.policy)
         if layers is None:
-            if self.update_path == "fast":
-                raise ValueError("update_path='fast' needs vector observations, the default MLP networks and Adam")
+            if self.update_path in ("fast", "compiled"):
+                raise ValueError(
+                    f"update_path={self.update_path!r} needs vector observations, the default MLP networks and Adam"
+                )
             return None
-        return FastUpdate(self.policy, *layers)
+        return FastUpdate(self.policy, *layers, compiled=self.update_path == "compiled")
 
     def _update(self) -> None:
         """One end-of-episode update: Algorithm 1 with K fitted iterations over the whole buffer D."""
@@ -367,7 +371,7 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
             if self.reset_critic:
                 self.policy.reset_critic()
                 if fast is not None:
-                    fast.critic.adam.reset()
+                    fast.critic.reset_adam()
             self._reset_bn_statistics(self.critic, None if fast is None else fast.critic)
             if fast is None:
                 critic_loss = self._fit_critic(obs, actions, q_targets, weights)
@@ -378,7 +382,7 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
             if self.reset_actor:
                 self.policy.reset_actor()
                 if fast is not None:
-                    fast.actor.adam.reset()
+                    fast.actor.reset_adam()
             self._reset_bn_statistics(self.actor, None if fast is None else fast.actor)
             if self.actor_steps > 0:
                 if fast is None:

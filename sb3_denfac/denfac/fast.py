@@ -1,15 +1,18 @@
-"""Fast path of DENFAC's end-of-episode update (issue 7): the same arithmetic as the plain autograd path, fewer ops.
+"""Fast paths of DENFAC's end-of-episode update (issue 7): the same arithmetic as the plain autograd path, fewer ops.
 
 The update fits tiny networks (e.g. 5-50-7-1) on a few thousand samples hundreds of times, so per-op dispatch and
-memory passes dominate, not FLOPs. :class:`FlatBNMLP` runs a ``create_bn_mlp`` network functionally:
+memory passes dominate, not FLOPs. Each critic step and each actor step is one pure function of tensors:
 
 - parameters live in one flat tensor (the module's parameters become views of it), so Adam and gradient clipping are
   a handful of ops per step instead of a handful per parameter tensor;
+- activations are feature-major (features, N): the long sample axis is the matmuls' inner/outer dimension and the
+  per-feature batch-norm reductions are contiguous;
 - batch norm is folded into the following linear layer (``W diag(gamma rstd)``, shifted bias); its backward uses the
-  reductions the weight-gradient matmul already computes, so a BN layer costs one ``var_mean`` pass forward and one
-  ``addcmul`` pass backward;
+  reductions the weight-gradient matmul already computes (one extra ``addcmul`` pass per BN layer);
 - hand-written backward (no autograd graph); the critic's input layer in eval mode is split into an observation part,
-  computed once per fitted iteration, and an action part for the G actor steps.
+  computed once per fitted iteration, and an action part for the G actor steps;
+- ``update_path="compiled"`` runs the same step functions through ``torch.compile`` (one compilation per process and
+  network shape, dynamic in N), which fuses the element-wise passes around the matmuls.
 
 Running statistics, Adam moments and the step count follow PyTorch's ``BatchNorm1d`` and ``Adam`` exactly (up to float
 rounding), so the fast and plain paths give the same result for the same seed (tested). Everything stays on the
@@ -72,43 +75,224 @@ def parse_bn_mlp(net: nn.Module) -> list[_Layer] | None:
     return layers
 
 
-class FlatAdam:
-    """torch.optim.Adam (no weight decay, no amsgrad) on one flat tensor, with global-norm gradient clipping.
+@dataclass(frozen=True)
+class _Spec:
+    """Static description of a ``create_bn_mlp`` network for the step functions (hashable: compile-cache key)."""
 
-    Reads its moments from / writes them back to the module's ``torch.optim.Adam`` state so both paths interoperate.
-    """
+    sizes: tuple[int, ...]  # in, hidden..., out
+    bn: tuple[bool, ...]  # per linear layer: batch norm before it
+    slopes: tuple[float | None, ...]  # per linear layer: leaky-ReLU slope after it (None: linear output)
+    eps: tuple[float, ...]  # per linear layer: BN epsilon (0 without BN)
 
-    def __init__(self, flat: th.Tensor, params: list[nn.Parameter], optimizer: th.optim.Optimizer):
+    @staticmethod
+    def of(layers: list[_Layer]) -> _Spec:
+        return _Spec(
+            sizes=(layers[0].linear.in_features, *(layer.linear.out_features for layer in layers)),
+            bn=tuple(layer.bn is not None for layer in layers),
+            slopes=tuple(layer.slope for layer in layers),
+            eps=tuple(float(layer.bn.eps) if layer.bn is not None else 0.0 for layer in layers),
+        )
+
+    def unpack(self, flat: th.Tensor) -> list[tuple[th.Tensor | None, th.Tensor | None, th.Tensor, th.Tensor]]:
+        """(gamma, beta, W, b) views per linear layer, in ``nn.Sequential.parameters()`` order."""
+        out, offset = [], 0
+        for i in range(len(self.bn)):
+            d_in, d_out = self.sizes[i], self.sizes[i + 1]
+            gamma = beta = None
+            if self.bn[i]:
+                gamma, beta = flat[offset : offset + d_in], flat[offset + d_in : offset + 2 * d_in]
+                offset += 2 * d_in
+            weight = flat[offset : offset + d_in * d_out].view(d_out, d_in)
+            offset += d_in * d_out
+            out.append((gamma, beta, weight, flat[offset : offset + d_out]))
+            offset += d_out
+        return out
+
+
+def _train_forward(spec: _Spec, flat: th.Tensor, x: th.Tensor, stats0: tuple[th.Tensor, th.Tensor] | None):
+    """Train-mode forward on feature-major x (features, N); returns output, cache and BN batch (mean, var)s."""
+    cache, stats = [], []
+    h = x
+    for i, (gamma, beta, weight, bias) in enumerate(spec.unpack(flat)):
+        if gamma is not None:
+            var, mean = stats0 if (i == 0 and stats0 is not None) else row_var_mean(h)
+            rstd = th.rsqrt(var + spec.eps[i])
+            scale = gamma * rstd
+            w_eff = weight * scale
+            b_eff = bias + weight @ (beta - mean * scale)
+            stats.append((mean, var))
+            cache.append((h, mean, rstd, w_eff))
+        else:
+            w_eff, b_eff = weight, bias
+            cache.append((h, None, None, w_eff))
+        z = th.addmm(b_eff.unsqueeze(1), w_eff, h)
+        h = th.nn.functional.leaky_relu(z, spec.slopes[i]) if spec.slopes[i] is not None else z
+    cache.append((h, None, None, None))
+    return h, cache, stats
+
+
+def _backward(spec: _Spec, flat: th.Tensor, cache: list, grad_out: th.Tensor, input_grad: bool = False):
+    """Flat parameter gradient (and d loss / d input if ``input_grad``) of a train-mode forward."""
+    params = spec.unpack(flat)
+    grads: list[th.Tensor] = []
+    n = grad_out.shape[1]
+    dz, dx = grad_out, None
+    for i in range(len(params) - 1, -1, -1):
+        gamma, beta, weight, _ = params[i]
+        if spec.slopes[i] is not None:
+            dz = _leaky_relu_backward(dz, cache[i + 1][0], spec.slopes[i])
+        h, mean, rstd, w_eff = cache[i]
+        row_sum = dz.sum(1)
+        m = dz @ h.t()  # sum_n dz x^T, (out, in)
+        need_dx = i > 0 or input_grad
+        if gamma is None:
+            layer_grads = [m, row_sum]
+            if need_dx:
+                dx = weight.t() @ dz
+        else:
+            t = (m - row_sum[:, None] * mean[None, :]) * rstd  # sum_n dz xhat^T
+            d_weight = t * gamma + row_sum[:, None] * beta[None, :]
+            d_beta = row_sum @ weight  # sum_n dL/dh
+            d_gamma = (weight * t).sum(0)  # sum_n dL/dh * xhat
+            layer_grads = [d_gamma, d_beta, d_weight, row_sum]
+            if need_dx:
+                # dx = rstd (g - mean_n g - xhat mean_n(g xhat)), g = gamma dL/dh: an affine map of x per feature
+                rstd2_b = rstd * rstd * gamma * d_gamma / n
+                dx = th.addmm((rstd2_b * mean - rstd * gamma * d_beta / n).unsqueeze(1), w_eff.t(), dz)
+                dx = dx - h * rstd2_b.unsqueeze(1)
+        grads = layer_grads + grads
+        dz = dx  # type: ignore[assignment]
+    return th.cat([g.reshape(-1) for g in grads]), dx
+
+
+def _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bias_correction2_sqrt, beta1, beta2, eps, max_grad_norm) -> None:
+    """In-place Adam step (torch.optim.Adam's arithmetic) after global-norm clipping (clip_grad_norm_'s)."""
+    if max_grad_norm is not None:
+        grad = grad * th.clamp(max_grad_norm / (th.linalg.vector_norm(grad) + 1e-6), max=1.0)
+    exp_avg.lerp_(grad, 1 - beta1)
+    exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
+    denom = (exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(eps)
+    flat.sub_(step_size * exp_avg / denom)
+
+
+def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_grad_norm: float | None):
+    def critic_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, x, stats0, q, c):
+        out, cache, stats = _train_forward(spec, flat, x, stats0)
+        diff = out - q
+        weighted = c * diff
+        loss = (weighted * diff).mean()
+        grad, _ = _backward(spec, flat, cache, weighted * (2.0 / x.shape[1]))
+        _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bc2_sqrt, betas[0], betas[1], eps, max_grad_norm)
+        return loss, stats
+
+    return critic_step
+
+
+def _make_actor_step(
+    spec: _Spec, critic_slopes: tuple, betas: tuple[float, float], eps: float, max_grad_norm: float | None, inverting: bool
+):
+    def actor_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, obs, obs_part, w_act, critic_affines):
+        pi, cache, stats = _train_forward(spec, flat, obs, None)
+        # Critic in eval mode on (s, pi(s)) (BN folded with running statistics), then d mean(Q) / d pi by hand.
+        outs = []
+        z = th.addmm(obs_part, w_act, pi)
+        for i, (weight, bias) in enumerate(critic_affines):
+            if i > 0:
+                z = th.addmm(bias.unsqueeze(1), weight, outs[-1])
+            outs.append(th.nn.functional.leaky_relu(z, critic_slopes[i]) if critic_slopes[i] is not None else z)
+        objective = outs[-1].mean()
+        dz = th.full_like(outs[-1], 1.0 / pi.shape[1])
+        for i in range(len(critic_affines) - 1, -1, -1):
+            if critic_slopes[i] is not None:
+                dz = _leaky_relu_backward(dz, outs[i], critic_slopes[i])
+            dz = (critic_affines[i][0] if i > 0 else w_act).t() @ dz
+        if inverting:
+            dz = invert_gradients(dz, pi, -th.ones_like(objective), th.ones_like(objective))
+        grad, _ = _backward(spec, flat, cache, -dz)
+        _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bc2_sqrt, betas[0], betas[1], eps, max_grad_norm)
+        return objective, stats
+
+    return actor_step
+
+
+_COMPILED: dict = {}
+
+
+def _step_function(kind: str, compiled: bool, *key):
+    """The (optionally torch.compile'd) step function for a static key; compiled ones are cached per process."""
+    factory = _make_critic_step if kind == "critic" else _make_actor_step
+    if not compiled:
+        return factory(*key)
+    if (kind, key) not in _COMPILED:
+        _COMPILED[(kind, key)] = th.compile(factory(*key), dynamic=True)
+    return _COMPILED[(kind, key)]
+
+
+class _FlatNet:
+    """A ``create_bn_mlp`` network bound to one flat parameter tensor, with flat Adam state and BN bookkeeping."""
+
+    def __init__(self, net: nn.Module, layers: list[_Layer], optimizer: th.optim.Optimizer):
+        self.net, self.layers, self.spec = net, layers, _Spec.of(layers)
+        self.params = list(net.parameters())
+        self.flat = th.cat([p.detach().reshape(-1) for p in self.params])
+        offset = 0
+        for p in self.params:  # module parameters become views of ``flat`` (in-place resets write into it)
+            p.data = self.flat[offset : offset + p.numel()].view_as(p)
+            offset += p.numel()
+        self.bn_layers = [layer.bn for layer in layers if layer.bn is not None]
+        self.bn_counts = [int(bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[arg-type]
+        self.optimizer = optimizer
         group = optimizer.param_groups[0]
-        self.lr, (self.beta1, self.beta2), self.eps = group["lr"], group["betas"], group["eps"]
-        self.flat, self.params, self.optimizer = flat, params, optimizer
-        self.exp_avg, self.exp_avg_sq = th.zeros_like(flat), th.zeros_like(flat)
+        self.lr, self.betas, self.eps = float(group["lr"]), tuple(group["betas"]), float(group["eps"])
+        self.exp_avg, self.exp_avg_sq = th.zeros_like(self.flat), th.zeros_like(self.flat)
         self.step_count = 0
-        states = [optimizer.state.get(p) for p in params]
-        if all(s for s in states):
-            self.exp_avg.copy_(th.cat([s["exp_avg"].reshape(-1) for s in states]))  # type: ignore[index]
-            self.exp_avg_sq.copy_(th.cat([s["exp_avg_sq"].reshape(-1) for s in states]))  # type: ignore[index]
+        states = [optimizer.state.get(p) for p in self.params]
+        if all(states):
+            self.exp_avg.copy_(th.cat([st["exp_avg"].reshape(-1) for st in states]))  # type: ignore[index]
+            self.exp_avg_sq.copy_(th.cat([st["exp_avg_sq"].reshape(-1) for st in states]))  # type: ignore[index]
             self.step_count = int(float(states[0]["step"]))  # type: ignore[index]
 
-    def reset(self) -> None:
+    def reset_adam(self) -> None:
         self.exp_avg.zero_()
         self.exp_avg_sq.zero_()
         self.step_count = 0
 
-    def step(self, grad: th.Tensor, max_grad_norm: float | None) -> None:
-        if max_grad_norm is not None:  # as clip_grad_norm_, without a host sync
-            coef = max_grad_norm / (th.linalg.vector_norm(grad) + 1e-6)
-            grad.mul_(th.clamp(coef, max=1.0))
+    def reset_bn_counts(self) -> None:
+        """Call after the running statistics were reset outside (num_batches_tracked back to 0)."""
+        self.bn_counts = [0] * len(self.bn_layers)
+
+    def adam_scalars(self) -> tuple[th.Tensor, th.Tensor]:
+        """Advance the step count; lr / (1 - beta1^t) and sqrt(1 - beta2^t) as 0-d tensors (no recompilation)."""
         self.step_count += 1
-        self.exp_avg.lerp_(grad, 1 - self.beta1)
-        self.exp_avg_sq.mul_(self.beta2).addcmul_(grad, grad, value=1 - self.beta2)
-        bias_correction1 = 1 - self.beta1**self.step_count
-        bias_correction2_sqrt = math.sqrt(1 - self.beta2**self.step_count)
-        denom = (self.exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(self.eps)
-        self.flat.addcdiv_(self.exp_avg, denom, value=-self.lr / bias_correction1)
+        t = self.step_count
+        step_size = self.lr / (1 - self.betas[0] ** t)
+        device = self.flat.device
+        return th.tensor(step_size, device=device), th.tensor(math.sqrt(1 - self.betas[1] ** t), device=device)
+
+    @th.no_grad()
+    def update_running_stats(self, stats: list[tuple[th.Tensor, th.Tensor]], n: int) -> None:
+        """BatchNorm1d's running-statistics update (momentum, or cumulative average when momentum is None)."""
+        for j, (bn, (mean, var)) in enumerate(zip(self.bn_layers, stats, strict=True)):
+            bn.num_batches_tracked.add_(1)  # type: ignore[union-attr, operator]
+            self.bn_counts[j] += 1  # host copy: no device sync
+            factor = bn.momentum if bn.momentum is not None else 1.0 / self.bn_counts[j]
+            bn.running_mean.lerp_(mean, factor)  # type: ignore[union-attr]
+            bn.running_var.lerp_(var * (n / (n - 1)), factor)  # type: ignore[union-attr]
+
+    @th.no_grad()
+    def eval_affines(self) -> list[tuple[th.Tensor, th.Tensor]]:
+        """Eval-mode (running statistics) weight and bias of every linear layer, BN folded in."""
+        out = []
+        for layer, (gamma, beta, weight, bias) in zip(self.layers, self.spec.unpack(self.flat), strict=True):
+            if layer.bn is None:
+                out.append((weight, bias))
+            else:
+                scale = gamma * th.rsqrt(layer.bn.running_var + layer.bn.eps)  # type: ignore[operator]
+                out.append((weight * scale, bias + weight @ (beta - layer.bn.running_mean * scale)))  # type: ignore[operator]
+        return out
 
     def write_back(self) -> None:
-        """Store the moments in the torch optimizer's state (a later plain update or a save sees them)."""
+        """Store the Adam moments in the torch optimizer's state (a later plain update or a save sees them)."""
         self.optimizer.state.clear()
         if self.step_count == 0:
             return
@@ -121,120 +305,6 @@ class FlatAdam:
                 "exp_avg_sq": self.exp_avg_sq[offset : offset + n].view_as(p).clone(),
             }
             offset += n
-
-
-class FlatBNMLP:
-    """Functional forward/backward of a ``create_bn_mlp`` network whose parameters are bound to one flat tensor."""
-
-    def __init__(self, net: nn.Module, layers: list[_Layer], optimizer: th.optim.Optimizer):
-        self.net, self.layers = net, layers
-        self.params = [p for p in net.parameters()]
-        self.flat = th.cat([p.detach().reshape(-1) for p in self.params])
-        self.grad = th.zeros_like(self.flat)
-        # Bind: module parameters become views of ``flat`` (in-place resets then write into it).
-        self.views: dict[int, tuple[th.Tensor, th.Tensor]] = {}
-        offset = 0
-        for p in self.params:
-            n = p.numel()
-            p.data = self.flat[offset : offset + n].view_as(p)
-            self.views[id(p)] = (p.data, self.grad[offset : offset + n].view_as(p))
-            offset += n
-        self.adam = FlatAdam(self.flat, self.params, optimizer)
-        self.bn_counts: dict[int, int] = {}  # host copy of num_batches_tracked per BN layer
-
-    def reset_bn_counts(self) -> None:
-        """Call after the running statistics were reset outside (num_batches_tracked back to 0)."""
-        self.bn_counts = {i: 0 for i, layer in enumerate(self.layers) if layer.bn is not None}
-
-    def _grad_of(self, p: th.Tensor) -> th.Tensor:
-        return self.views[id(p)][1]
-
-    @staticmethod
-    def _fold(layer: _Layer, mean: th.Tensor, rstd: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-        """Weight and bias of Linear(BN(x)) as an affine map of x, and the BN scale gamma * rstd."""
-        bn, lin = layer.bn, layer.linear
-        scale = bn.weight * rstd  # type: ignore[union-attr]
-        weight = lin.weight * scale
-        bias = th.addmv(lin.bias, lin.weight, bn.bias - mean * scale)  # type: ignore[union-attr]
-        return weight, bias, scale
-
-    def _eval_affine(self, layer: _Layer) -> tuple[th.Tensor, th.Tensor]:
-        if layer.bn is None:
-            return layer.linear.weight, layer.linear.bias
-        rstd = th.rsqrt(layer.bn.running_var + layer.bn.eps)  # type: ignore[operator]
-        weight, bias, _ = self._fold(layer, layer.bn.running_mean, rstd)  # type: ignore[arg-type]
-        return weight, bias
-
-    @th.no_grad()
-    def forward_train(self, x_t: th.Tensor, input_stats: tuple[th.Tensor, th.Tensor] | None = None) -> tuple[th.Tensor, list]:
-        """Train-mode forward on feature-major input (features, N): batch statistics, running statistics updated as
-        BatchNorm1d. Returns the output (out, N) and the cache for :meth:`backward`."""
-        cache = []
-        h = x_t
-        n = x_t.shape[1]
-        for i, layer in enumerate(self.layers):
-            if layer.bn is not None:
-                bn = layer.bn
-                var, mean = input_stats if (i == 0 and input_stats is not None) else row_var_mean(h)
-                rstd = th.rsqrt(var + bn.eps)
-                weight, bias, _ = self._fold(layer, mean, rstd)
-                bn.num_batches_tracked.add_(1)  # type: ignore[union-attr, operator]
-                if bn.momentum is not None:
-                    factor = bn.momentum
-                else:  # cumulative average; counted on the host so no device sync is needed
-                    self.bn_counts[i] = self.bn_counts.get(i, int(bn.num_batches_tracked) - 1) + 1  # type: ignore[arg-type]
-                    factor = 1.0 / self.bn_counts[i]
-                bn.running_mean.lerp_(mean, factor)  # type: ignore[union-attr]
-                bn.running_var.lerp_(var * (n / (n - 1)), factor)  # type: ignore[union-attr]
-                cache.append((h, mean, rstd, weight))
-            else:
-                weight, bias = layer.linear.weight, layer.linear.bias
-                cache.append((h, None, None, weight))
-            z = th.addmm(bias.unsqueeze(1), weight, h)
-            h = th.nn.functional.leaky_relu(z, layer.slope) if layer.slope is not None else z
-        cache.append((h, None, None, None))
-        return h, cache
-
-    @th.no_grad()
-    def backward(self, grad_out: th.Tensor, cache: list, input_grad: bool = False) -> th.Tensor | None:
-        """Write parameter gradients into ``self.grad`` (overwritten); optionally return d loss / d input (feature-major)."""
-        dz = grad_out
-        n = grad_out.shape[1]
-        dx = None
-        for i in range(len(self.layers) - 1, -1, -1):
-            layer = self.layers[i]
-            if layer.slope is not None:
-                dz = _leaky_relu_backward(dz, cache[i + 1][0], layer.slope)
-            h, mean, rstd, weight_eff = cache[i]
-            lin = layer.linear
-            row_sum = dz.sum(1)
-            m = dz @ h.t()  # sum_n dz x^T, (out, in)
-            self._grad_of(lin.bias).copy_(row_sum)
-            need_dx = i > 0 or input_grad
-            if layer.bn is None:
-                self._grad_of(lin.weight).copy_(m)
-                if need_dx:
-                    dx = lin.weight.t() @ dz
-            else:
-                bn = layer.bn
-                t = (m - row_sum[:, None] * mean[None, :]) * rstd  # sum_n dz xhat^T
-                th.addcmul(t * bn.weight, row_sum[:, None], bn.bias[None, :], out=self._grad_of(lin.weight))
-                dbeta = row_sum @ lin.weight  # sum_n dL/dh
-                dgamma = (lin.weight * t).sum(0)  # sum_n dL/dh * xhat
-                self._grad_of(bn.weight).copy_(dgamma)
-                self._grad_of(bn.bias).copy_(dbeta)
-                if need_dx:
-                    # dx = rstd (g - mean_n g - xhat mean_n(g xhat)), g = gamma dL/dh, as an affine map of x per feature
-                    rstd2_b = rstd * rstd * bn.weight * dgamma / n
-                    dx = th.addmm((rstd2_b * mean - rstd * bn.weight * dbeta / n).unsqueeze(1), weight_eff.t(), dz)
-                    dx.addcmul_(h, -rstd2_b.unsqueeze(1))
-            dz = dx  # type: ignore[assignment]
-        return dx
-
-    @th.no_grad()
-    def eval_affines(self) -> list[tuple[th.Tensor, th.Tensor]]:
-        """Eval-mode (running statistics) weight and bias of every layer, BN folded in."""
-        return [self._eval_affine(layer) for layer in self.layers]
 
 
 def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
@@ -260,15 +330,16 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
 
 
 class FastUpdate:
-    """Critic fit and actor fit of one DENFAC update on flat, functional networks (see module docstring)."""
+    """Critic fit and actor fit of one DENFAC update with the step functions above (eager or compiled)."""
 
-    def __init__(self, policy, actor_layers: list[_Layer], critic_layers: list[_Layer]):
-        self.actor = FlatBNMLP(policy.actor.mu, actor_layers, policy.actor.optimizer)
-        self.critic = FlatBNMLP(policy.critic.qf, critic_layers, policy.critic.optimizer)
+    def __init__(self, policy, actor_layers: list[_Layer], critic_layers: list[_Layer], compiled: bool = False):
+        self.actor = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
+        self.critic = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
+        self.compiled = compiled
 
     def write_back(self) -> None:
-        self.actor.adam.write_back()
-        self.critic.adam.write_back()
+        self.actor.write_back()
+        self.critic.write_back()
 
     @th.no_grad()
     def fit_critic(
@@ -283,53 +354,39 @@ class FastUpdate:
     ) -> th.Tensor:
         """``steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2; returns the last loss (a tensor, no host sync)."""
         net = self.critic
-        inputs_t = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
+        step = _step_function("critic", self.compiled, net.spec, net.betas, net.eps, max_grad_norm)
+        inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
-        full_stats = row_var_mean(inputs_t) if net.layers[0].bn is not None else None  # fixed data: once
+        full_stats = row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
         loss = th.zeros((), device=obs.device)
         for _ in range(steps):
-            idx = batch_indices(inputs_t.shape[1])
-            x, q, c = (inputs_t, q_t, c_t) if idx is None else (inputs_t[:, idx], q_t[:, idx], c_t[:, idx])
-            out, cache = net.forward_train(x, full_stats if idx is None else None)
-            diff = out - q
-            weighted = c * diff
-            loss = (weighted * diff).mean()
-            net.backward(weighted.mul_(2.0 / x.shape[1]), cache)
-            net.adam.step(net.grad, max_grad_norm)
+            idx = batch_indices(inputs.shape[1])
+            x, q, c = (inputs, q_t, c_t) if idx is None else (inputs[:, idx], q_t[:, idx], c_t[:, idx])
+            loss, stats = step(
+                net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), x, full_stats if idx is None else None, q, c
+            )
+            net.update_running_stats(stats, x.shape[1])
         return loss
 
     @th.no_grad()
     def fit_actor(self, obs: th.Tensor, steps: int, max_grad_norm: float | None, inverting: bool, batch_indices) -> th.Tensor:
         """G Adam steps ascending 1/N sum Q(s, pi(s)) (critic in eval mode); returns the last objective."""
+        net = self.actor
+        step = _step_function(
+            "actor", self.compiled, net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting
+        )
         obs_t = obs.float().t().contiguous()
-        action_dim = self.actor.layers[-1].linear.out_features
-        critic_layers = self.critic.layers
+        action_dim = net.spec.sizes[-1]
         critic_affines = self.critic.eval_affines()
         w_first, b_first = critic_affines[0]
-        w_obs, w_act = w_first[:, :-action_dim], w_first[:, -action_dim:]
-        obs_part_full = th.addmm(b_first.unsqueeze(1), w_obs, obs_t)  # fixed over the G steps (critic and data fixed)
-        low, high = -th.ones((), device=obs.device), th.ones((), device=obs.device)
+        w_act = w_first[:, -action_dim:].contiguous()
+        obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         objective = th.zeros((), device=obs.device)
         for _ in range(steps):
             idx = batch_indices(obs_t.shape[1])
             o, obs_part = (obs_t, obs_part_full) if idx is None else (obs_t[:, idx], obs_part_full[:, idx])
-            n = o.shape[1]
-            pi, cache = self.actor.forward_train(o)
-            # Critic forward in eval mode on (s, pi(s)), keeping the activations for d mean(Q) / d pi.
-            outs = []
-            z = th.addmm(obs_part, w_act, pi)
-            for i, (layer, (weight, bias)) in enumerate(zip(critic_layers, critic_affines, strict=True)):
-                if i > 0:
-                    z = th.addmm(bias.unsqueeze(1), weight, outs[-1])
-                outs.append(th.nn.functional.leaky_relu(z, layer.slope) if layer.slope is not None else z)
-            objective = outs[-1].mean()
-            dz = th.full_like(outs[-1], 1.0 / n)
-            for i in range(len(critic_layers) - 1, -1, -1):
-                if critic_layers[i].slope is not None:
-                    dz = _leaky_relu_backward(dz, outs[i], critic_layers[i].slope)
-                dz = (critic_affines[i][0] if i > 0 else w_act).t() @ dz
-            if inverting:
-                dz = invert_gradients(dz, pi, low, high)
-            self.actor.backward(dz.neg_(), cache)
-            self.actor.adam.step(self.actor.grad, max_grad_norm)
+            objective, stats = step(
+                net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), o, obs_part, w_act, critic_affines
+            )
+            net.update_running_stats(stats, o.shape[1])
         return objective
