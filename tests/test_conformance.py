@@ -521,6 +521,50 @@ def test_float64_action_space(name: str, obs_dtype: type) -> None:
         assert env.action_space.contains(action)
 
 
+class SpacesEnv(gym.Env):
+    """Given observation and action spaces, random observations, reward 0."""
+
+    def __init__(self, observation_space: spaces.Space, action_space: spaces.Space) -> None:
+        self.observation_space, self.action_space = observation_space, action_space
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[Any, float, bool, bool, dict]:
+        assert self.action_space.contains(action), action
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_multidimensional_action_space(name: str) -> None:
+    """A Box action of shape (2, 2) works as in SB3 (tests/test_spaces.py): actions keep the space's shape."""
+    box = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+    env = gym.wrappers.TimeLimit(SpacesEnv(box, spaces.Box(-2.0, 2.0, shape=(2, 2), dtype=np.float32)), EPISODE)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    for deterministic in (True, False):
+        action, _ = model.predict(box.sample(), deterministic=deterministic)
+        assert action.shape == (2, 2) and env.action_space.contains(action)
+
+
+@pytest.mark.parametrize(
+    "observation_space", [spaces.Discrete(5), spaces.MultiDiscrete([3, 2]), spaces.MultiBinary(4)], ids=str
+)
+@pytest.mark.parametrize("name", ALGOS)
+def test_discrete_observation_spaces(name: str, observation_space: spaces.Space) -> None:
+    """Discrete-like observations (one-hot encoded by SB3) work, or are refused with a ValueError naming the space."""
+    env = gym.wrappers.TimeLimit(SpacesEnv(observation_space, spaces.Box(-1.0, 1.0, shape=(1,))), EPISODE)
+    try:
+        model = make_model(name, env=env)
+    except ValueError as error:
+        assert str(observation_space) in str(error)
+        return
+    model.learn(2 * EPISODE)
+    action, _ = model.predict(observation_space.sample(), deterministic=True)
+    assert action.shape == (1,)
+
+
 @pytest.mark.parametrize("name", ALGOS)
 def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
     env = VecNormalize(DummyVecEnv([make_env]), gamma=0.9, norm_obs=True, norm_reward=True)
