@@ -389,6 +389,18 @@ def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
 
 
+@pytest.mark.parametrize("name", ALGOS)
+def test_custom_logger(tmp_path: pathlib.Path, name: str) -> None:
+    """A logger set with ``set_logger`` is kept by ``learn`` and receives the train/ keys (SB3 tests/test_logger.py)."""
+    from stable_baselines3.common.logger import configure
+
+    model = make_model(name)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(3 * EPISODE, log_interval=1)
+    header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
+    assert any(key.startswith("train/") for key in header), header
+
+
 class CountingCallback(BaseCallback):
     def __init__(self) -> None:
         super().__init__()
