@@ -97,9 +97,11 @@ def check_model_zip(path: Any) -> Any:
         if position is not None:
             target.seek(position)
     try:
-        if "policy_class" not in json.loads(data_json):
+        stored = json.loads(data_json)
+        if "policy_class" not in stored:
             return None
-        return json_to_data(data_json).get("policy_class")
+        # Deserialise only the policy class (SB3's load deserialises the rest, with its own warnings).
+        return json_to_data(json.dumps({"policy_class": stored["policy_class"]})).get("policy_class")
     except Exception:  # noqa: BLE001 - an undecodable class is left to SB3's own error
         return None
 
