@@ -690,3 +690,20 @@ def test_ddpg_target_networks_copy_batch_norm_statistics() -> None:
         online_weights = th.cat([p.flatten() for p in online.parameters()])
         target_weights = th.cat([p.flatten() for p in target.parameters()])
         assert not th.equal(online_weights, target_weights)  # tau < 1: the targets lag
+
+
+@pytest.mark.slow
+def test_denfac_compiled_path_save_and_resume(tmp_path: pathlib.Path) -> None:
+    """DENFAC's torch.compile update path keeps the contract: the model saves, loads and resumes exactly."""
+    model = make_model("denfac", update_path="compiled", seed=2)
+    model.learn(2 * EPISODE)
+    model.save(tmp_path / "model.zip")
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+    loaded = algo_class("denfac").load(tmp_path / "model.zip", env=make_env())
+    loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    assert loaded.update_path == "compiled"
+    model.set_env(make_env(), force_reset=True)
+    for copy in (model, loaded):
+        copy.set_random_seed(7)
+        copy.learn(2 * EPISODE, reset_num_timesteps=False)
+    assert_same_parameters(model.get_parameters(), loaded.get_parameters())
