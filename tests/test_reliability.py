@@ -89,6 +89,19 @@ def test_load_with_mismatched_env(tmp_path: pathlib.Path, name: str) -> None:
         algo_class(name).load(tmp_path / "model.zip", env=cartpole)
 
 
+@pytest.mark.parametrize("name", ALGOS)
+def test_learn_without_env(tmp_path: pathlib.Path, name: str) -> None:
+    """Loaded without ``env=``: predict works, learn says how to give an environment (needs InputChecksMixin)."""
+    make_model(name).save(tmp_path / "model.zip")
+    model = algo_class(name).load(tmp_path / "model.zip")
+    assert model.get_env() is None
+    model.predict(model.observation_space.sample(), deterministic=True)
+    with pytest.raises(ValueError, match="needs an environment"):
+        model.learn(EPISODE)
+    model.set_env(make_env())
+    model.learn(EPISODE)
+
+
 # ----- NaN / inf inputs ------------------------------------------------------------------------------------------------
 class CorruptingWrapper(gym.Wrapper):
     """Puts ``value`` into the observation (at reset or at step ``at_step``) or into the reward of step ``at_step``."""
@@ -186,6 +199,13 @@ def test_finite_inputs_mixin_catches_nan_actions() -> None:
             parameter.fill_(np.nan)
     model.learning_starts = 0
     with pytest.raises(ValueError, match="found nan in actions"):
+        model.learn(10)
+
+
+def test_env_required_mixin(tmp_path: pathlib.Path) -> None:
+    _checked_td3(make_env()).save(tmp_path / "model.zip")
+    model = CheckedTD3.load(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=r"CheckedTD3.learn\(\) needs an environment"):
         model.learn(10)
 
 

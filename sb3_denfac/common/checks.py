@@ -7,7 +7,8 @@
 - :class:`ModelFileCheckMixin` makes ``load`` refuse, with a ``ValueError`` naming the problem, a truncated or corrupted
   model zip (SB3 itself only asserts "No data found") and a zip that another algorithm saved (e.g. a TD3 zip given to
   ``DENFAC.load``, which SB3 would let fail somewhere inside ``_setup_model``).
-- :class:`InputChecksMixin` is both; add it as the FIRST base of an algorithm class::
+- :class:`EnvRequiredMixin` makes ``learn`` without an environment a ``ValueError`` saying how to give one.
+- :class:`InputChecksMixin` is all three; add it as the FIRST base of an algorithm class::
 
       class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm): ...
 """
@@ -127,5 +128,18 @@ class ModelFileCheckMixin:
         return super().load(path, *args, **kwargs)  # type: ignore[misc]
 
 
-class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin):
-    """Both checks of this module; put it first in an algorithm's bases."""
+class EnvRequiredMixin:
+    """``learn`` without an environment (e.g. after ``load(path)`` without ``env=``) raises a ``ValueError`` that says
+    what to do, instead of SB3's bare ``assert self.env is not None`` (on-policy and custom algorithms)."""
+
+    env: VecEnv | None
+
+    def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
+        if self.env is None:
+            name = type(self).__name__
+            raise ValueError(f"{name}.learn() needs an environment: pass env= to {name}.load(...) or call set_env(env) first")
+        return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
+
+
+class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, EnvRequiredMixin):
+    """All checks of this module; put it first in an algorithm's bases."""
