@@ -1,14 +1,15 @@
 """Compute cost of one DENFAC end-of-episode update (issue 7), against a reference, the arithmetic floor and DDPG.
 
-For each setting (paper's Acrobot and Half-Cheetah sizes) it times, in the same run and with the same thread count:
+For each setting (paper's Acrobot and Half-Cheetah sizes) it times, in the same run and with the same thread count,
+DENFAC's own update with ``update_path`` "compiled", "fast" and "plain", against:
 
 (a) ``reference``: a straightforward PyTorch implementation of the same update (Algorithm 1: modules and Adam rebuilt
     at every reset, autograd, ``clip_grad_norm_``), kept in this file;
 (b) ``floor``: the update's matrix-multiply FLOPs divided by the GFLOP/s of a large matmul measured in this run;
 (c) ``ddpg``: SB3 DDPG's training cost for the same amount of data, i.e. one episode of ``episode_steps`` transitions
-    with one gradient step of batch 64 per transition (and the paper's 8 additional updates: x9, computed);
-plus DENFAC's own update with ``update_path="fast"`` and ``"plain"``. Medians over repeats; results with ratios go to
-``benchmarks/results/update_cost.{md,json}``.
+    with one gradient step of batch 64 per transition (and the paper's 8 additional updates: x9, computed).
+
+Medians over repeats; results with ratios go to ``benchmarks/results/update_cost.{md,json}``.
 
 Usage: ``python benchmarks/update_cost.py [--repeats 5] [--threads 1]``
 """
@@ -195,7 +196,8 @@ def ddpg_episode_time(cfg: dict, repeats: int) -> float:
     return median_time(lambda: model.train(gradient_steps=EPISODE_STEPS, batch_size=64), repeats)
 
 
-def denfac_update_time(cfg: dict, path: str, repeats: int) -> float:
+def denfac_update_time(cfg: dict, path: str, repeats: int) -> tuple[float, float]:
+    """Median time of one update and the time of the first one (includes torch.compile for path="compiled")."""
     from stable_baselines3.common.logger import configure
 
     from sb3_denfac.denfac import DENFAC
@@ -223,7 +225,10 @@ def denfac_update_time(cfg: dict, path: str, repeats: int) -> float:
     rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
     rb.behaviour_means[:, 0], rb.rewards[:, 0], rb.dones[:, 0] = data["means"], data["rewards"][:, 0], data["dones"][:, 0]
     rb.full = True
-    return median_time(model._update, repeats)
+    start = time.perf_counter()
+    model._update()
+    first = time.perf_counter() - start
+    return median_time(model._update, repeats), first
 
 
 def main() -> None:
@@ -250,8 +255,9 @@ def main() -> None:
     for name in args.settings:
         cfg = SETTINGS[name]
         gflops_before = matmul_gflops()
-        fast = denfac_update_time(cfg, "fast", args.repeats)
-        plain = denfac_update_time(cfg, "plain", max(1, args.repeats // 2))
+        compiled, compile_first = denfac_update_time(cfg, "compiled", args.repeats)
+        fast, _ = denfac_update_time(cfg, "fast", args.repeats)
+        plain, _ = denfac_update_time(cfg, "plain", max(1, args.repeats // 2))
         data = {k: th.as_tensor(v) for k, v in random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]).items()}
         nets = dict(
             actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
@@ -267,15 +273,19 @@ def main() -> None:
             update_gflop=flops / 1e9,
             matmul_gflops_per_s=gflops,
             floor_s=floor,
+            compiled_s=compiled,
+            compiled_first_update_s=compile_first,
             fast_s=fast,
             plain_s=plain,
             reference_s=reference,
             ddpg_episode_s=ddpg,
             ddpg_episode_with_8_additional_updates_s=9 * ddpg,
-            speedup_vs_reference=reference / fast,
-            speedup_vs_plain=plain / fast,
+            compiled_speedup_vs_reference=reference / compiled,
+            compiled_over_floor=compiled / floor,
+            fast_speedup_vs_reference=reference / fast,
             fast_over_floor=fast / floor,
-            fast_over_ddpg_episode=fast / ddpg,
+            plain_speedup_vs_reference=reference / plain,
+            compiled_over_ddpg_episode=compiled / ddpg,
         )
         print(name, json.dumps(results["settings"][name], indent=1), flush=True)
     results["meta"]["load_average_end"] = os.getloadavg()
@@ -288,21 +298,24 @@ def main() -> None:
         f"(fast) / {max(1, args.repeats // 2)} (others) repeats; load average {results['meta']['load_average'][0]:.1f} "
         f"at start, {results['meta']['load_average_end'][0]:.1f} at end.",
         "",
-        "| setting | D | fast (s) | plain (s) | reference (s) | floor (s) | GFLOP/update | matmul GFLOP/s | "
-        "reference / fast | fast / floor | DDPG episode (s) | DDPG x9 (s) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| setting | D | compiled (s) | fast (s) | plain (s) | reference (s) | floor (s) | GFLOP/update | matmul GFLOP/s "
+        "| reference / compiled | compiled / floor | reference / fast | fast / floor | DDPG episode (s) | DDPG x9 (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in results["settings"].items():
         lines.append(
-            f"| {name} | {r['config']['buffer_size']} | {r['fast_s']:.3f} | {r['plain_s']:.3f} | {r['reference_s']:.3f} | "
-            f"{r['floor_s']:.3f} | {r['update_gflop']:.2f} | {r['matmul_gflops_per_s']:.1f} | "
-            f"{r['speedup_vs_reference']:.1f}x | {r['fast_over_floor']:.1f}x | {r['ddpg_episode_s']:.3f} | "
+            f"| {name} | {r['config']['buffer_size']} | {r['compiled_s']:.3f} | {r['fast_s']:.3f} | {r['plain_s']:.3f} | "
+            f"{r['reference_s']:.3f} | {r['floor_s']:.3f} | {r['update_gflop']:.2f} | {r['matmul_gflops_per_s']:.1f} | "
+            f"{r['compiled_speedup_vs_reference']:.1f}x | {r['compiled_over_floor']:.1f}x | "
+            f"{r['fast_speedup_vs_reference']:.1f}x | {r['fast_over_floor']:.1f}x | {r['ddpg_episode_s']:.3f} | "
             f"{r['ddpg_episode_with_8_additional_updates_s']:.3f} |"
         )
     lines += [
         "",
-        "- fast / plain: DENFAC's `update_path`; reference: straightforward PyTorch in this file (modules and Adam "
-        "rebuilt at resets, autograd).",
+        "- compiled / fast / plain: DENFAC's `update_path` (compiled = the fast step functions through torch.compile; "
+        "its first update, which compiles, took "
+        + ", ".join(f"{n} {r['compiled_first_update_s']:.0f} s" for n, r in results["settings"].items())
+        + "); reference: straightforward PyTorch in this file (modules and Adam rebuilt at resets, autograd).",
         "- floor: matmul FLOPs of the update (forward, weight and input gradients; elementwise work not counted) / GFLOP/s "
         "of a 1024x1024 float32 matmul measured in the same run.",
         f"- DDPG: SB3 DDPG `train()` for one {EPISODE_STEPS}-step episode (one batch-64 gradient step per transition, "

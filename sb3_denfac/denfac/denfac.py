@@ -412,7 +412,7 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
         self: SelfDENFAC,
         total_timesteps: int,
         callback: MaybeCallback = None,
-        log_interval: int = 4,
+        log_interval: int = 1,  # one update per episode: log every update (SB3's default is 4 episodes)
         tb_log_name: str = "DENFAC",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,

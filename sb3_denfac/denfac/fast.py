@@ -109,7 +109,14 @@ class _Spec:
         return out
 
 
-def _train_forward(spec: _Spec, flat: th.Tensor, x: th.Tensor, stats0: tuple[th.Tensor, th.Tensor] | None):
+def _linear(weight: th.Tensor, bias: th.Tensor, h: th.Tensor, fuse_bias: bool) -> th.Tensor:
+    """weight @ h + bias[:, None]. Eagerly one addmm; compiled, mm + add so the add fuses into the next pointwise."""
+    if fuse_bias:
+        return th.mm(weight, h) + bias.unsqueeze(1)
+    return th.addmm(bias.unsqueeze(1), weight, h)
+
+
+def _train_forward(spec: _Spec, flat: th.Tensor, x: th.Tensor, stats0: tuple[th.Tensor, th.Tensor] | None, fuse: bool = False):
     """Train-mode forward on feature-major x (features, N); returns output, cache and BN batch (mean, var)s."""
     cache, stats = [], []
     h = x
@@ -125,7 +132,7 @@ def _train_forward(spec: _Spec, flat: th.Tensor, x: th.Tensor, stats0: tuple[th.
         else:
             w_eff, b_eff = weight, bias
             cache.append((h, None, None, w_eff))
-        z = th.addmm(b_eff.unsqueeze(1), w_eff, h)
+        z = _linear(w_eff, b_eff, h, fuse)
         h = th.nn.functional.leaky_relu(z, spec.slopes[i]) if spec.slopes[i] is not None else z
     cache.append((h, None, None, None))
     return h, cache, stats
@@ -175,9 +182,9 @@ def _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bias_correction2_sqrt, be
     flat.sub_(step_size * exp_avg / denom)
 
 
-def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_grad_norm: float | None):
+def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_grad_norm: float | None, fuse: bool = False):
     def critic_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, x, stats0, q, c):
-        out, cache, stats = _train_forward(spec, flat, x, stats0)
+        out, cache, stats = _train_forward(spec, flat, x, stats0, fuse)
         diff = out - q
         weighted = c * diff
         loss = (weighted * diff).mean()
@@ -189,23 +196,46 @@ def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_g
 
 
 def _make_actor_step(
-    spec: _Spec, critic_slopes: tuple, betas: tuple[float, float], eps: float, max_grad_norm: float | None, inverting: bool
+    spec: _Spec,
+    critic_slopes: tuple,
+    betas: tuple[float, float],
+    eps: float,
+    max_grad_norm: float | None,
+    inverting: bool,
+    fuse: bool = False,
 ):
     def actor_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, obs, obs_part, w_act, critic_affines):
-        pi, cache, stats = _train_forward(spec, flat, obs, None)
+        pi, cache, stats = _train_forward(spec, flat, obs, None, fuse)
         # Critic in eval mode on (s, pi(s)) (BN folded with running statistics), then d mean(Q) / d pi by hand.
+        if fuse:  # obs_part + w_act @ pi as broadcasts: one fused pass with the activation (few actions)
+            z = obs_part
+            for a in range(pi.shape[0]):
+                z = z + w_act[:, a : a + 1] * pi[a : a + 1]
+        else:
+            z = th.addmm(obs_part, w_act, pi)
         outs = []
-        z = th.addmm(obs_part, w_act, pi)
         for i, (weight, bias) in enumerate(critic_affines):
             if i > 0:
-                z = th.addmm(bias.unsqueeze(1), weight, outs[-1])
+                z = _linear(weight, bias, outs[-1], fuse)
             outs.append(th.nn.functional.leaky_relu(z, critic_slopes[i]) if critic_slopes[i] is not None else z)
         objective = outs[-1].mean()
         dz = th.full_like(outs[-1], 1.0 / pi.shape[1])
-        for i in range(len(critic_affines) - 1, -1, -1):
+        n_layers = len(critic_affines)
+        last = 1 if (fuse and n_layers > 1) else 0
+        for i in range(n_layers - 1, last - 1, -1):
             if critic_slopes[i] is not None:
                 dz = _leaky_relu_backward(dz, outs[i], critic_slopes[i])
+            if i == last == 1:
+                break  # dz = dL/dz_2, finished below
             dz = (critic_affines[i][0] if i > 0 else w_act).t() @ dz
+        if last == 1:
+            # dz = dL/dz_2 (small). d/dpi_a = sum_k dz[k] sum_j W2[k, j] w_act[j, a] D1[j]: one (A*K, H) @ (H, N) matmul on
+            # the activation derivative D1, instead of materialising the wide (H, N) gradient twice.
+            slope0 = critic_slopes[0]
+            d1 = th.where(outs[0] > 0, 1.0, slope0) if slope0 is not None else th.ones_like(outs[0])
+            w2 = critic_affines[1][0]
+            stacked = (w2.unsqueeze(0) * w_act.t().unsqueeze(1)).reshape(-1, w2.shape[1])  # (A*K, H)
+            dz = (th.mm(stacked, d1).view(w_act.shape[1], w2.shape[0], -1) * dz.unsqueeze(0)).sum(1)
         if inverting:
             dz = invert_gradients(dz, pi, -th.ones_like(objective), th.ones_like(objective))
         grad, _ = _backward(spec, flat, cache, -dz)
@@ -224,7 +254,7 @@ def _step_function(kind: str, compiled: bool, *key):
     if not compiled:
         return factory(*key)
     if (kind, key) not in _COMPILED:
-        _COMPILED[(kind, key)] = th.compile(factory(*key), dynamic=True)
+        _COMPILED[(kind, key)] = th.compile(factory(*key, fuse=True), dynamic=True)
     return _COMPILED[(kind, key)]
 
 
