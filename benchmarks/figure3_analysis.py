@@ -250,7 +250,7 @@ def plot_figure3(runs: list[Run], path: Path) -> None:
             x = np.arange(1, best.shape[1] + 1)
             with np.errstate(all="ignore"):
                 q1, med, q3 = np.nanpercentile(best, [25, 50, 75], axis=0)
-            color = colors(all_algos.index(algo) % 10)
+            color = colors((ALGO_ORDER + all_algos).index(algo) % 10)  # one fixed colour per algorithm
             label = f"{algo.upper()} (n={best.shape[0]})"
             ax.plot(x, med, color=color, label=label, lw=2.2 if algo == "denfac" else 1.3, drawstyle="steps-post")
             ax.fill_between(x, q1, q3, color=color, alpha=0.15, lw=0, step="post")
