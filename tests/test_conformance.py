@@ -707,3 +707,15 @@ def test_denfac_compiled_path_save_and_resume(tmp_path: pathlib.Path) -> None:
         copy.set_random_seed(7)
         copy.learn(2 * EPISODE, reset_num_timesteps=False)
     assert_same_parameters(model.get_parameters(), loaded.get_parameters())
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_class_documents_every_argument(name: str) -> None:
+    """sb3-contrib style: an ``MlpPolicy`` alias and a ``:param name:`` line for every constructor argument."""
+    import inspect
+
+    cls = algo_class(name)
+    assert "MlpPolicy" in cls.policy_aliases
+    parameters = [p for p in inspect.signature(cls.__init__).parameters if p != "self"]
+    missing = [p for p in parameters if f":param {p}:" not in (cls.__doc__ or "")]
+    assert not missing, f"{cls.__name__} docstring lacks {missing}"
