@@ -1,5 +1,6 @@
-"""SB3's plugin contract for the package's five algorithms (after SB3's own tests: save/load, set_env, predict, batch
-norm train/eval mode, determinism, TensorBoard, callbacks, float64 actions, VecNormalize, progress bar).
+"""SB3's plugin contract for the package's five algorithms, part 1: save/load, set_env, policy and replay-buffer files,
+determinism, predict, batch-norm train/eval mode (after SB3's tests/test_save_load.py, test_deterministic.py,
+test_predict.py, test_train_eval_mode.py). Parts 2-4: ``test_conformance_{logging,spaces,training}.py``.
 
 Every case is tiny: Pendulum-v1 cut to ``EPISODE`` steps, networks of a few units, one or two gradient steps per
 update. ``tests/test_reliability.py`` imports ``ALGOS``, ``algo_class``, ``make_model`` and ``make_env`` from here.
@@ -19,15 +20,8 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import (
-    BaseCallback,
-    CallbackList,
-    CheckpointCallback,
-    EvalCallback,
-    StopTrainingOnMaxEpisodes,
-)
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
 
@@ -142,6 +136,8 @@ def assert_same_parameters(params_a: dict, params_b: dict) -> None:
 
 
 # ----- save / load (SB3 tests/test_save_load.py) -----------------------------------------------------------------------
+
+
 @pytest.mark.parametrize("name", ALGOS)
 def test_save_load(tmp_path: pathlib.Path, name: str) -> None:
     model = make_model(name, seed=0)
@@ -285,6 +281,8 @@ def test_save_load_replay_buffer(tmp_path: pathlib.Path, name: str) -> None:
 
 
 # ----- determinism (SB3 tests/test_deterministic.py) -------------------------------------------------------------------
+
+
 @pytest.mark.parametrize("name", ALGOS)
 def test_deterministic_training(name: str) -> None:
     observations = sample_observations(make_env().observation_space)
@@ -310,6 +308,8 @@ def test_deterministic_training(name: str) -> None:
 
 
 # ----- predict (SB3 tests/test_predict.py) -----------------------------------------------------------------------------
+
+
 @pytest.mark.parametrize("name", ALGOS)
 def test_predict_shapes_and_wrapping(name: str) -> None:
     model = make_model(name)
@@ -346,6 +346,8 @@ def test_predict_shapes_and_wrapping(name: str) -> None:
 
 
 # ----- batch norm: train / eval mode (SB3 tests/test_train_eval_mode.py) -----------------------------------------------
+
+
 @pytest.mark.parametrize("name", ALGOS)
 def test_batch_norm_train_eval_mode(name: str) -> None:
     model = make_model(name)
@@ -367,119 +369,6 @@ def test_batch_norm_train_eval_mode(name: str) -> None:
     assert changed, "training did not update any batch-norm running statistics"
 
 
-# ----- logging, callbacks, progress bar (SB3 tests/test_tensorboard.py, test_callbacks.py) -----------------------------
-@pytest.mark.parametrize("name", ALGOS)
-def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    model = make_model(name, tensorboard_log=str(tmp_path))
-    model.learn(3 * EPISODE, log_interval=1)
-    class_name = type(model).__name__
-    run_dirs = [p for p in tmp_path.iterdir() if p.is_dir()]
-    assert [p.name for p in run_dirs] == [f"{class_name}_1"], "tb_log_name must default to the class name"
-    event_files = list(run_dirs[0].glob("events.out.tfevents.*"))
-    assert event_files
-    accumulator = EventAccumulator(str(run_dirs[0]))
-    accumulator.Reload()
-    tags = accumulator.Tags()["scalars"]
-    assert any(tag.startswith("train/") for tag in tags), tags
-    assert "time/fps" in tags or any(tag.startswith("rollout/") for tag in tags), tags
-
-    model.learn(EPISODE, reset_num_timesteps=False, log_interval=1)  # continues the same run
-    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_custom_logger(tmp_path: pathlib.Path, name: str) -> None:
-    """A logger set with ``set_logger`` is kept by ``learn`` and receives the train/ keys (SB3 tests/test_logger.py)."""
-    from stable_baselines3.common.logger import configure
-
-    model = make_model(name)
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(3 * EPISODE, log_interval=1)
-    header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
-    assert any(key.startswith("train/") for key in header), header
-
-
-class CountingCallback(BaseCallback):
-    def __init__(self) -> None:
-        super().__init__()
-        self.calls = dict(training_start=0, rollout_start=0, step=0, rollout_end=0, training_end=0)
-
-    def _on_training_start(self) -> None:
-        self.calls["training_start"] += 1
-
-    def _on_rollout_start(self) -> None:
-        self.calls["rollout_start"] += 1
-
-    def _on_step(self) -> bool:
-        self.calls["step"] += 1
-        return True
-
-    def _on_rollout_end(self) -> None:
-        self.calls["rollout_end"] += 1
-
-    def _on_training_end(self) -> None:
-        self.calls["training_end"] += 1
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_callbacks(tmp_path: pathlib.Path, name: str) -> None:
-    model = make_model(name)
-    counting = CountingCallback()
-    checkpoint = CheckpointCallback(
-        save_freq=2 * EPISODE,
-        save_path=str(tmp_path / "checkpoints"),
-        save_replay_buffer=name in OFF_POLICY,
-    )
-    evaluation = EvalCallback(
-        make_env(),
-        eval_freq=2 * EPISODE,
-        n_eval_episodes=1,
-        log_path=str(tmp_path / "eval"),
-        best_model_save_path=str(tmp_path / "best"),
-        warn=False,
-    )
-    model.learn(4 * EPISODE, callback=CallbackList([counting, checkpoint, evaluation]))
-
-    assert counting.calls["step"] == model.num_timesteps == 4 * EPISODE
-    assert counting.calls["training_start"] == counting.calls["training_end"] == 1
-    assert counting.calls["rollout_start"] >= 1 and counting.calls["rollout_end"] >= 1
-    for steps in (2 * EPISODE, 4 * EPISODE):
-        assert (tmp_path / "checkpoints" / f"rl_model_{steps}_steps.zip").exists()
-    if name in OFF_POLICY:
-        assert (tmp_path / "checkpoints" / f"rl_model_replay_buffer_{2 * EPISODE}_steps.pkl").exists()
-    loaded = algo_class(name).load(tmp_path / "checkpoints" / f"rl_model_{2 * EPISODE}_steps.zip")
-    assert loaded.num_timesteps == 2 * EPISODE
-    evaluations = np.load(tmp_path / "eval" / "evaluations.npz")
-    np.testing.assert_array_equal(evaluations["timesteps"], [2 * EPISODE, 4 * EPISODE])
-    assert (tmp_path / "best" / "best_model.zip").exists()
-
-
-class StopAfter(BaseCallback):
-    def __init__(self, n_calls: int) -> None:
-        super().__init__()
-        self.limit = n_calls
-
-    def _on_step(self) -> bool:
-        return self.n_calls < self.limit
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_callback_stops_training(name: str) -> None:
-    model = make_model(name)
-    model.learn(10 * EPISODE, callback=StopAfter(EPISODE + 5))
-    assert model.num_timesteps == EPISODE + 5
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_stop_on_max_episodes(name: str) -> None:
-    """SB3's StopTrainingOnMaxEpisodes reads ``locals["dones"]``: every training loop must expose it."""
-    model = make_model(name)
-    model.learn(10 * EPISODE, callback=StopTrainingOnMaxEpisodes(max_episodes=2))
-    assert model.num_timesteps == 2 * EPISODE
-
-
 @pytest.mark.parametrize("name", ALGOS)
 def test_save_load_file_object(name: str) -> None:
     model = make_model(name, seed=0)
@@ -492,204 +381,6 @@ def test_save_load_file_object(name: str) -> None:
     np.testing.assert_allclose(
         model.predict(observations, deterministic=True)[0], loaded.predict(observations, deterministic=True)[0], atol=1e-6
     )
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_progress_bar(name: str) -> None:
-    model = make_model(name)
-    model.learn(2 * EPISODE, progress_bar=True)
-    assert model.num_timesteps == 2 * EPISODE
-
-
-# ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
-class Float64ActionEnv(gym.Env):
-    """Observation Box(-1, 1, (2,)) (float32 or float64, as HalfCheetah), action Box([0, -1], [4, 3]) float64."""
-
-    action_space = spaces.Box(np.array([0.0, -1.0]), np.array([4.0, 3.0]), dtype=np.float64)  # asymmetric bounds
-
-    def __init__(self, obs_dtype: type = np.float32) -> None:
-        self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=obs_dtype)
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
-        assert self.action_space.contains(action), action
-        return self.observation_space.sample(), -float(np.sum(np.square(action))), False, False, {}
-
-
-@pytest.mark.parametrize("obs_dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("name", ALGOS)
-def test_float64_action_space(name: str, obs_dtype: type) -> None:
-    """Box float64 actions work like float32 ones: actions keep the space's dtype and bounds."""
-    env = gym.wrappers.TimeLimit(Float64ActionEnv(obs_dtype), max_episode_steps=EPISODE)
-    model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
-    observation, _ = env.reset(seed=0)
-    for deterministic in (True, False):
-        action, _ = model.predict(observation, deterministic=deterministic)
-        assert action.dtype == np.float64
-        assert env.action_space.contains(action)
-
-
-class SpacesEnv(gym.Env):
-    """Given observation and action spaces, random observations, reward 0."""
-
-    def __init__(self, observation_space: spaces.Space, action_space: spaces.Space) -> None:
-        self.observation_space, self.action_space = observation_space, action_space
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
-        super().reset(seed=seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action: np.ndarray) -> tuple[Any, float, bool, bool, dict]:
-        assert self.action_space.contains(action), action
-        return self.observation_space.sample(), 0.0, False, False, {}
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_multidimensional_action_space(name: str) -> None:
-    """A Box action of shape (2, 2) works as in SB3 (tests/test_spaces.py): actions keep the space's shape."""
-    box = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
-    env = gym.wrappers.TimeLimit(SpacesEnv(box, spaces.Box(-2.0, 2.0, shape=(2, 2), dtype=np.float32)), EPISODE)
-    model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
-    for deterministic in (True, False):
-        action, _ = model.predict(box.sample(), deterministic=deterministic)
-        assert action.shape == (2, 2) and env.action_space.contains(action)
-
-
-@pytest.mark.parametrize(
-    "observation_space", [spaces.Discrete(5), spaces.MultiDiscrete([3, 2]), spaces.MultiBinary(4)], ids=str
-)
-@pytest.mark.parametrize("name", ALGOS)
-def test_discrete_observation_spaces(name: str, observation_space: spaces.Space) -> None:
-    """Discrete-like observations (one-hot encoded by SB3) work, or are refused with a ValueError naming the space."""
-    env = gym.wrappers.TimeLimit(SpacesEnv(observation_space, spaces.Box(-1.0, 1.0, shape=(1,))), EPISODE)
-    try:
-        model = make_model(name, env=env)
-    except ValueError as error:
-        assert str(observation_space) in str(error)
-        return
-    model.learn(2 * EPISODE)
-    action, _ = model.predict(observation_space.sample(), deterministic=True)
-    assert action.shape == (1,)
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
-    env = VecNormalize(DummyVecEnv([make_env]), gamma=0.9, norm_obs=True, norm_reward=True)
-    model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
-    assert model.get_vec_normalize_env() is env
-    assert env.obs_rms.count > 2 * EPISODE
-    if isinstance(model, OffPolicyAlgorithm):
-        # The replay buffer keeps the original observations (Pendulum: cos^2 + sin^2 = 1), normalised at sampling.
-        observations = model.replay_buffer.observations[: model.replay_buffer.size(), 0]
-        np.testing.assert_allclose(np.square(observations[:, :2]).sum(axis=1), 1.0, rtol=1e-5)
-    env.save(str(tmp_path / "vec_normalize.pkl"))
-    model.save(tmp_path / "model.zip")
-    loaded_env = VecNormalize.load(str(tmp_path / "vec_normalize.pkl"), DummyVecEnv([make_env]))
-    model = algo_class(name).load(tmp_path / "model.zip", env=loaded_env)
-    assert model.get_vec_normalize_env() is loaded_env
-    model.learn(EPISODE, reset_num_timesteps=False)
-    assert model.num_timesteps == 3 * EPISODE
-
-
-# ----- off-policy train frequency (SB3 tests/test_run.py) --------------------------------------------------------------
-@pytest.mark.parametrize("train_freq", [4, (2, "step"), (1, "episode")])
-def test_ddpg_train_freq(train_freq: Any) -> None:
-    model = make_model("ddpg", train_freq=train_freq, gradient_steps=-1, learning_starts=EPISODE)
-    model.learn(2 * EPISODE)
-    assert model.num_timesteps == 2 * EPISODE
-    assert model._n_updates == EPISODE  # gradient_steps=-1: one update per collected step after learning_starts
-
-
-# ----- env ids and true terminations ------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ALGOS)
-def test_env_id_string(name: str) -> None:
-    """An env id is made by SB3 (Pendulum-v1: 200-step episodes)."""
-    overrides = dict(buffer_size=200) if name.startswith("denfac") else {}
-    model = make_model(name, env="Pendulum-v1", **overrides)
-    model.learn(10)
-    assert model.num_timesteps >= 10
-    assert model.get_env().get_attr("spec")[0].id == "Pendulum-v1"
-
-
-@pytest.mark.parametrize("name", ALGOS)
-def test_true_terminations(name: str) -> None:
-    """The paper's CartPole ends early on failure: training runs through terminations and, off-policy, the buffer tells
-    failures (dones without timeout) from time limits (timeouts)."""
-    horizon = 5 * EPISODE  # a random start fails in about 50 steps
-    env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, episode_length=horizon, random_start=True)
-    overrides = dict(buffer_size=4 * horizon) if name in OFF_POLICY else {}
-    model = make_model(name, env=env, seed=0, **overrides)
-    model.learn(2 * horizon)
-    assert model.num_timesteps >= 2 * horizon
-    lengths = [info["l"] for info in model.ep_info_buffer]
-    failures = sum(length < horizon for length in lengths)
-    assert failures >= 1, "the test needs early terminations"
-    if isinstance(model, OffPolicyAlgorithm):
-        size = model.replay_buffer.size()
-        dones = model.replay_buffer.dones[:size, 0].astype(bool)
-        timeouts = model.replay_buffer.timeouts[:size, 0].astype(bool)
-        assert dones.sum() == len(lengths)  # every finished episode ends with done
-        assert (dones & ~timeouts).sum() >= failures  # failures are true terminations, not time limits
-        assert timeouts.sum() <= len(lengths) - failures
-
-
-# ----- learning-rate schedules and several environments ---------------------------------------------------------------
-def _optimizers(model: BaseAlgorithm) -> list[th.optim.Optimizer]:
-    policy = model.policy
-    candidates = [getattr(policy, "optimizer", None), getattr(policy, "actor_optimizer", None)]
-    candidates += [getattr(policy, "critic_optimizer", None)]
-    candidates += [getattr(getattr(policy, net, None), "optimizer", None) for net in ("actor", "critic")]
-    found: list[th.optim.Optimizer] = []
-    for optimizer in candidates:
-        if isinstance(optimizer, th.optim.Optimizer) and all(optimizer is not seen for seen in found):
-            found.append(optimizer)
-    return found
-
-
-@pytest.mark.parametrize("name", [name for name in ALGOS if name != "cmaes"])  # CMA-ES has no learning rate
-def test_learning_rate_schedule(name: str) -> None:
-    """A schedule of the remaining progress given as ``learning_rate`` is followed (SB3 semantics), not just read once."""
-    model = make_model(name, learning_rate=lambda progress_remaining: 1e-3 * progress_remaining)
-    optimizers = _optimizers(model)
-    assert optimizers
-    assert all(group["lr"] == pytest.approx(1e-3) for opt in optimizers for group in opt.param_groups)
-    model.learn(4 * EPISODE)
-    for optimizer in _optimizers(model):  # looked up again: a network reset may build a new optimizer
-        for group in optimizer.param_groups:
-            assert group["lr"] <= 0.5e-3, "learning_rate schedule ignored"
-
-
-@pytest.mark.parametrize("name", ["ddpg", "cacla"])  # step-wise algorithms
-def test_several_envs(name: str) -> None:
-    from stable_baselines3.common.env_util import make_vec_env
-
-    model = make_model(name, env=make_vec_env(make_env, n_envs=2, seed=0))
-    model.learn(2 * EPISODE)
-    assert model.num_timesteps == 2 * EPISODE
-    assert model.n_envs == 2
-    actions, _ = model.predict(model.get_env().reset(), deterministic=True)
-    assert actions.shape == (2, *model.action_space.shape)
-
-
-def test_ddpg_target_networks_copy_batch_norm_statistics() -> None:
-    """As SB3's TD3 (GH#996): running statistics are copied to the targets, weights are Polyak-averaged."""
-    model = make_model("ddpg", tau=0.1)
-    model.learn(2 * EPISODE)
-    policy = model.policy
-    for online, target in ((policy.actor, policy.actor_target), (policy.critic, policy.critic_target)):
-        online_stats, target_stats = batch_norm_buffers(online), batch_norm_buffers(target)
-        assert online_stats
-        for key, value in online_stats.items():
-            assert th.equal(value, target_stats[key]), key
-        online_weights = th.cat([p.flatten() for p in online.parameters()])
-        target_weights = th.cat([p.flatten() for p in target.parameters()])
-        assert not th.equal(online_weights, target_weights)  # tau < 1: the targets lag
 
 
 @pytest.mark.slow

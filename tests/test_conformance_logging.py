@@ -1,0 +1,147 @@
+"""SB3 plugin contract, part 2: TensorBoard and custom loggers, callbacks (counts, checkpoints, evaluation, early stop),
+progress bar (after SB3's tests/test_tensorboard.py, test_logger.py, test_callbacks.py). Helpers: ``test_conformance.py``."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+from stable_baselines3.common.callbacks import (
+    BaseCallback,
+    CallbackList,
+    CheckpointCallback,
+    EvalCallback,
+    StopTrainingOnMaxEpisodes,
+)
+from test_conformance import (
+    ALGOS,
+    EPISODE,
+    OFF_POLICY,
+    algo_class,
+    make_env,
+    make_model,
+)
+
+import sb3_denfac  # noqa: F401  (registers the paper envs)
+
+# ----- logging, callbacks, progress bar (SB3 tests/test_tensorboard.py, test_callbacks.py) -----------------------------
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    model = make_model(name, tensorboard_log=str(tmp_path))
+    model.learn(3 * EPISODE, log_interval=1)
+    class_name = type(model).__name__
+    run_dirs = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert [p.name for p in run_dirs] == [f"{class_name}_1"], "tb_log_name must default to the class name"
+    event_files = list(run_dirs[0].glob("events.out.tfevents.*"))
+    assert event_files
+    accumulator = EventAccumulator(str(run_dirs[0]))
+    accumulator.Reload()
+    tags = accumulator.Tags()["scalars"]
+    assert any(tag.startswith("train/") for tag in tags), tags
+    assert "time/fps" in tags or any(tag.startswith("rollout/") for tag in tags), tags
+
+    model.learn(EPISODE, reset_num_timesteps=False, log_interval=1)  # continues the same run
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_custom_logger(tmp_path: pathlib.Path, name: str) -> None:
+    """A logger set with ``set_logger`` is kept by ``learn`` and receives the train/ keys (SB3 tests/test_logger.py)."""
+    from stable_baselines3.common.logger import configure
+
+    model = make_model(name)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(3 * EPISODE, log_interval=1)
+    header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
+    assert any(key.startswith("train/") for key in header), header
+
+
+class CountingCallback(BaseCallback):
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = dict(training_start=0, rollout_start=0, step=0, rollout_end=0, training_end=0)
+
+    def _on_training_start(self) -> None:
+        self.calls["training_start"] += 1
+
+    def _on_rollout_start(self) -> None:
+        self.calls["rollout_start"] += 1
+
+    def _on_step(self) -> bool:
+        self.calls["step"] += 1
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.calls["rollout_end"] += 1
+
+    def _on_training_end(self) -> None:
+        self.calls["training_end"] += 1
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_callbacks(tmp_path: pathlib.Path, name: str) -> None:
+    model = make_model(name)
+    counting = CountingCallback()
+    checkpoint = CheckpointCallback(
+        save_freq=2 * EPISODE,
+        save_path=str(tmp_path / "checkpoints"),
+        save_replay_buffer=name in OFF_POLICY,
+    )
+    evaluation = EvalCallback(
+        make_env(),
+        eval_freq=2 * EPISODE,
+        n_eval_episodes=1,
+        log_path=str(tmp_path / "eval"),
+        best_model_save_path=str(tmp_path / "best"),
+        warn=False,
+    )
+    model.learn(4 * EPISODE, callback=CallbackList([counting, checkpoint, evaluation]))
+
+    assert counting.calls["step"] == model.num_timesteps == 4 * EPISODE
+    assert counting.calls["training_start"] == counting.calls["training_end"] == 1
+    assert counting.calls["rollout_start"] >= 1 and counting.calls["rollout_end"] >= 1
+    for steps in (2 * EPISODE, 4 * EPISODE):
+        assert (tmp_path / "checkpoints" / f"rl_model_{steps}_steps.zip").exists()
+    if name in OFF_POLICY:
+        assert (tmp_path / "checkpoints" / f"rl_model_replay_buffer_{2 * EPISODE}_steps.pkl").exists()
+    loaded = algo_class(name).load(tmp_path / "checkpoints" / f"rl_model_{2 * EPISODE}_steps.zip")
+    assert loaded.num_timesteps == 2 * EPISODE
+    evaluations = np.load(tmp_path / "eval" / "evaluations.npz")
+    np.testing.assert_array_equal(evaluations["timesteps"], [2 * EPISODE, 4 * EPISODE])
+    assert (tmp_path / "best" / "best_model.zip").exists()
+
+
+class StopAfter(BaseCallback):
+    def __init__(self, n_calls: int) -> None:
+        super().__init__()
+        self.limit = n_calls
+
+    def _on_step(self) -> bool:
+        return self.n_calls < self.limit
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_callback_stops_training(name: str) -> None:
+    model = make_model(name)
+    model.learn(10 * EPISODE, callback=StopAfter(EPISODE + 5))
+    assert model.num_timesteps == EPISODE + 5
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_stop_on_max_episodes(name: str) -> None:
+    """SB3's StopTrainingOnMaxEpisodes reads ``locals["dones"]``: every training loop must expose it."""
+    model = make_model(name)
+    model.learn(10 * EPISODE, callback=StopTrainingOnMaxEpisodes(max_episodes=2))
+    assert model.num_timesteps == 2 * EPISODE
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_progress_bar(name: str) -> None:
+    model = make_model(name)
+    model.learn(2 * EPISODE, progress_bar=True)
+    assert model.num_timesteps == 2 * EPISODE

@@ -1,0 +1,157 @@
+"""SB3 plugin contract, part 3: spaces and normalisation (float64 and multi-dimensional Box actions, discrete observations,
+VecNormalize, env ids, true terminations; after SB3's tests/test_spaces.py, test_vec_normalize.py). Helpers:
+``test_conformance.py``."""
+
+from __future__ import annotations
+
+import pathlib
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from test_conformance import (
+    ALGOS,
+    EPISODE,
+    OFF_POLICY,
+    algo_class,
+    make_env,
+    make_model,
+)
+
+import sb3_denfac  # noqa: F401  (registers the paper envs)
+
+# ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
+
+
+class Float64ActionEnv(gym.Env):
+    """Observation Box(-1, 1, (2,)) (float32 or float64, as HalfCheetah), action Box([0, -1], [4, 3]) float64."""
+
+    action_space = spaces.Box(np.array([0.0, -1.0]), np.array([4.0, 3.0]), dtype=np.float64)  # asymmetric bounds
+
+    def __init__(self, obs_dtype: type = np.float32) -> None:
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=obs_dtype)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        assert self.action_space.contains(action), action
+        return self.observation_space.sample(), -float(np.sum(np.square(action))), False, False, {}
+
+
+@pytest.mark.parametrize("obs_dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("name", ALGOS)
+def test_float64_action_space(name: str, obs_dtype: type) -> None:
+    """Box float64 actions work like float32 ones: actions keep the space's dtype and bounds."""
+    env = gym.wrappers.TimeLimit(Float64ActionEnv(obs_dtype), max_episode_steps=EPISODE)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    observation, _ = env.reset(seed=0)
+    for deterministic in (True, False):
+        action, _ = model.predict(observation, deterministic=deterministic)
+        assert action.dtype == np.float64
+        assert env.action_space.contains(action)
+
+
+class SpacesEnv(gym.Env):
+    """Given observation and action spaces, random observations, reward 0."""
+
+    def __init__(self, observation_space: spaces.Space, action_space: spaces.Space) -> None:
+        self.observation_space, self.action_space = observation_space, action_space
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[Any, float, bool, bool, dict]:
+        assert self.action_space.contains(action), action
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_multidimensional_action_space(name: str) -> None:
+    """A Box action of shape (2, 2) works as in SB3 (tests/test_spaces.py): actions keep the space's shape."""
+    box = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+    env = gym.wrappers.TimeLimit(SpacesEnv(box, spaces.Box(-2.0, 2.0, shape=(2, 2), dtype=np.float32)), EPISODE)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    for deterministic in (True, False):
+        action, _ = model.predict(box.sample(), deterministic=deterministic)
+        assert action.shape == (2, 2) and env.action_space.contains(action)
+
+
+@pytest.mark.parametrize(
+    "observation_space", [spaces.Discrete(5), spaces.MultiDiscrete([3, 2]), spaces.MultiBinary(4)], ids=str
+)
+@pytest.mark.parametrize("name", ALGOS)
+def test_discrete_observation_spaces(name: str, observation_space: spaces.Space) -> None:
+    """Discrete-like observations (one-hot encoded by SB3) work, or are refused with a ValueError naming the space."""
+    env = gym.wrappers.TimeLimit(SpacesEnv(observation_space, spaces.Box(-1.0, 1.0, shape=(1,))), EPISODE)
+    try:
+        model = make_model(name, env=env)
+    except ValueError as error:
+        assert str(observation_space) in str(error)
+        return
+    model.learn(2 * EPISODE)
+    action, _ = model.predict(observation_space.sample(), deterministic=True)
+    assert action.shape == (1,)
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
+    env = VecNormalize(DummyVecEnv([make_env]), gamma=0.9, norm_obs=True, norm_reward=True)
+    model = make_model(name, env=env)
+    model.learn(2 * EPISODE)
+    assert model.get_vec_normalize_env() is env
+    assert env.obs_rms.count > 2 * EPISODE
+    if isinstance(model, OffPolicyAlgorithm):
+        # The replay buffer keeps the original observations (Pendulum: cos^2 + sin^2 = 1), normalised at sampling.
+        observations = model.replay_buffer.observations[: model.replay_buffer.size(), 0]
+        np.testing.assert_allclose(np.square(observations[:, :2]).sum(axis=1), 1.0, rtol=1e-5)
+    env.save(str(tmp_path / "vec_normalize.pkl"))
+    model.save(tmp_path / "model.zip")
+    loaded_env = VecNormalize.load(str(tmp_path / "vec_normalize.pkl"), DummyVecEnv([make_env]))
+    model = algo_class(name).load(tmp_path / "model.zip", env=loaded_env)
+    assert model.get_vec_normalize_env() is loaded_env
+    model.learn(EPISODE, reset_num_timesteps=False)
+    assert model.num_timesteps == 3 * EPISODE
+
+
+# ----- env ids and true terminations ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_env_id_string(name: str) -> None:
+    """An env id is made by SB3 (Pendulum-v1: 200-step episodes)."""
+    overrides = dict(buffer_size=200) if name.startswith("denfac") else {}
+    model = make_model(name, env="Pendulum-v1", **overrides)
+    model.learn(10)
+    assert model.num_timesteps >= 10
+    assert model.get_env().get_attr("spec")[0].id == "Pendulum-v1"
+
+
+@pytest.mark.parametrize("name", ALGOS)
+def test_true_terminations(name: str) -> None:
+    """The paper's CartPole ends early on failure: training runs through terminations and, off-policy, the buffer tells
+    failures (dones without timeout) from time limits (timeouts)."""
+    horizon = 5 * EPISODE  # a random start fails in about 50 steps
+    env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, episode_length=horizon, random_start=True)
+    overrides = dict(buffer_size=4 * horizon) if name in OFF_POLICY else {}
+    model = make_model(name, env=env, seed=0, **overrides)
+    model.learn(2 * horizon)
+    assert model.num_timesteps >= 2 * horizon
+    lengths = [info["l"] for info in model.ep_info_buffer]
+    failures = sum(length < horizon for length in lengths)
+    assert failures >= 1, "the test needs early terminations"
+    if isinstance(model, OffPolicyAlgorithm):
+        size = model.replay_buffer.size()
+        dones = model.replay_buffer.dones[:size, 0].astype(bool)
+        timeouts = model.replay_buffer.timeouts[:size, 0].astype(bool)
+        assert dones.sum() == len(lengths)  # every finished episode ends with done
+        assert (dones & ~timeouts).sum() >= failures  # failures are true terminations, not time limits
+        assert timeouts.sum() <= len(lengths) - failures
