@@ -26,12 +26,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 import sb3_denfac  # noqa: F401  (registers the paper envs)
 
 EPISODE = 20  # steps per episode of every test env
-#: "denfac_plain" is DENFAC on its plain (autograd) update path; "denfac" takes the default (fast when possible).
-ALGOS = ["denfac", "denfac_plain", "ddpg", "nfac", "cacla", "cmaes"]
+#: Variants: "denfac_plain" is DENFAC on its plain (autograd) update path ("denfac" takes the default, fast when
+#: possible); "ddpg_ig" is DDPG with inverting gradients and an unbounded actor ("ddpg": SB3's tanh actor).
+ALGOS = ["denfac", "denfac_plain", "ddpg", "ddpg_ig", "nfac", "cacla", "cmaes"]
 CLASS_PATHS = {
     "denfac": "sb3_denfac.denfac:DENFAC",
     "denfac_plain": "sb3_denfac.denfac:DENFAC",
     "ddpg": "sb3_denfac.ddpg:DDPG",
+    "ddpg_ig": "sb3_denfac.ddpg:DDPG",
     "nfac": "sb3_denfac.nfac:NFAC",
     "cacla": "sb3_denfac.cacla:CACLA",
     "cmaes": "sb3_denfac.cmaes:CMAES",
@@ -59,6 +61,13 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
         batch_size=8,
         policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
     ),
+    "ddpg_ig": dict(
+        inverting_gradients=True,
+        buffer_size=5 * EPISODE,
+        learning_starts=10,
+        batch_size=8,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
     "nfac": dict(
         n_fitted_iterations=1,
         critic_steps=2,
@@ -68,7 +77,7 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
     "cacla": dict(n_steps=EPISODE, bn_window=4, policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4]))),
     "cmaes": dict(population_size=2, policy_kwargs=dict(net_arch=[4])),
 }
-OFF_POLICY = ["denfac", "denfac_plain", "ddpg"]
+OFF_POLICY = ["denfac", "denfac_plain", "ddpg", "ddpg_ig"]
 #: predict(deterministic=False) samples the truncated Gaussian exploration policy.
 EXPLORING_PREDICT = ["denfac", "denfac_plain", "nfac", "cacla"]
 
@@ -338,7 +347,7 @@ def test_predict_shapes_and_wrapping(name: str) -> None:
     stochastic = np.stack([model.predict(vec_obs, deterministic=False)[0] for _ in range(5)])
     if name in EXPLORING_PREDICT:
         assert not np.all(stochastic == stochastic[0]), "deterministic=False must sample the exploration policy"
-    elif name == "ddpg":  # SB3's TD3/DDPG semantics: predict() is the deterministic actor, noise is added in learn()
+    elif name.startswith("ddpg"):  # SB3's TD3/DDPG semantics: predict() is the deterministic actor, noise is added in learn()
         np.testing.assert_array_equal(stochastic[0], actions)
 
     with pytest.raises(ValueError, match="Unexpected observation shape"):

@@ -328,7 +328,15 @@ def test_corrupted_zip(tmp_path: pathlib.Path, name: str) -> None:
 
 
 #: A zip of another algorithm with another policy class (NFAC and CACLA share theirs: their zips are interchangeable).
-FOREIGN = {"denfac": "ddpg", "denfac_plain": "nfac", "ddpg": "nfac", "nfac": "denfac", "cacla": "cmaes", "cmaes": "cacla"}
+FOREIGN = {
+    "denfac": "ddpg",
+    "denfac_plain": "nfac",
+    "ddpg": "nfac",
+    "ddpg_ig": "cacla",
+    "nfac": "denfac",
+    "cacla": "cmaes",
+    "cmaes": "cacla",
+}
 
 
 @pytest.mark.parametrize("name", ALGOS)
