@@ -352,6 +352,45 @@ def validate_config_file(path: str | os.PathLike, algo: str, check_env_ids: bool
     return config
 
 
+def load_hyperparams(algo: str, env_id: str, conf_file: str | os.PathLike | None = None) -> dict[str, Any]:
+    """The validated YAML entry the zoo would use for (``algo``, ``env_id``), from this package's file by default."""
+    path = Path(conf_file) if conf_file is not None else default_config_path(algo)
+    entry = select_entry(load_config_file(path), env_id, path)
+    validate_entry(algo, entry, source=f"{path}, entry {env_id!r}")
+    return entry
+
+
+def make_model(
+    algo: str,
+    env_id: str,
+    hyperparams: dict[str, Any],
+    seed: int = 0,
+    monitor_dir: str | os.PathLike | None = None,
+    **model_kwargs: Any,
+) -> Any:
+    """Build the env and the model exactly as ``rl_zoo3``'s ExperimentManager does from a YAML entry, outside a zoo run.
+
+    The zoo's own preprocessing is reused (schedules, ``normalize``, ``policy_kwargs``, ``env_wrapper``, ``train_freq``
+    lists, ``noise_type``), without its log folders or callbacks. Used by the quickstart and the Figure 3 benchmark.
+
+    :param monitor_dir: where SB3's Monitor writes ``monitor.csv`` (with the entry's ``monitor_kwargs``); None: no file.
+    :param model_kwargs: extra constructor arguments (e.g. ``tensorboard_log``, ``verbose``, ``device``).
+    """
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    register()
+    hyperparams = dict(hyperparams)
+    hyperparams.setdefault("n_timesteps", 0)  # required by the zoo; callers budget in episodes
+    hyperparams.setdefault("policy", "MlpPolicy")
+    manager = ExperimentManager(argparse.Namespace(), algo, env_id, log_folder=os.devnull, seed=seed, verbose=0)
+    kwargs, manager.env_wrapper, _, manager.vec_env_wrapper = manager._preprocess_hyperparams(hyperparams)
+    if monitor_dir is not None:
+        manager.save_path = str(monitor_dir)
+    env = manager.create_envs(manager.n_envs, no_log=monitor_dir is None)
+    kwargs = manager._preprocess_action_noise(kwargs, {}, env)
+    return algorithm_class(algo)(env=env, seed=seed, **{"verbose": 0, **kwargs, **model_kwargs})
+
+
 # --------------------------------------------------------------------------------------------------------------------
 # Command line
 # --------------------------------------------------------------------------------------------------------------------
