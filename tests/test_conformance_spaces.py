@@ -155,3 +155,19 @@ def test_true_terminations(name: str) -> None:
         assert dones.sum() == len(lengths)  # every finished episode ends with done
         assert (dones & ~timeouts).sum() >= failures  # failures are true terminations, not time limits
         assert timeouts.sum() <= len(lengths) - failures
+
+
+PAPER_ENVS = ["sb3_denfac/ContinuousAcrobot-v0", "sb3_denfac/ContinuousCartPole-v0", "sb3_denfac/HalfCheetahPaper-v0"]
+
+
+@pytest.mark.parametrize("env_id", PAPER_ENVS)
+@pytest.mark.parametrize("name", ALGOS)
+def test_paper_envs(name: str, env_id: str) -> None:
+    """Every algorithm runs on every paper environment (short episodes)."""
+    env = gym.make(env_id, max_episode_steps=EPISODE, episode_length=EPISODE)
+    model = make_model(name, env=env, seed=0)
+    model.learn(2 * EPISODE)
+    observation, _ = env.reset(seed=1)
+    for deterministic in (True, False):
+        action, _ = model.predict(observation, deterministic=deterministic)
+        assert env.action_space.contains(action), action
