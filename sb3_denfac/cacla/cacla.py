@@ -14,8 +14,14 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from torch.nn import functional as F
 
 from sb3_denfac.cacla.policies import CACLAPolicy, MlpPolicy
-from sb3_denfac.common.networks import has_batch_norm, set_bn_training_mode
-from sb3_denfac.common.on_policy import DeterministicOnPolicyAlgorithm, Transitions, check_positive, td_targets
+from sb3_denfac.common.networks import has_batch_norm
+from sb3_denfac.common.on_policy import (
+    DeterministicOnPolicyAlgorithm,
+    Transitions,
+    check_positive,
+    refresh_bn_statistics,
+    td_targets,
+)
 
 SelfCACLA = TypeVar("SelfCACLA", bound="CACLA")
 
@@ -125,16 +131,10 @@ class CACLA(DeterministicOnPolicyAlgorithm):
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
         return n_steps >= n_rollout_steps
 
-    @th.no_grad()
     def refresh_bn_statistics(self) -> None:
-        """Update the running statistics of every BN layer from the states of the last ``bn_window`` steps."""
+        """Move the running statistics of every BN layer toward those of the states of the last ``bn_window`` steps."""
         states = th.as_tensor(np.concatenate(self._bn_states), device=self.device)
-        if len(states) < 2:
-            return
-        set_bn_training_mode(self.policy, True)
-        self.policy.actor_mean(states)
-        self.policy.predict_values(states)
-        set_bn_training_mode(self.policy, False)
+        refresh_bn_statistics([self.policy.actor, self.policy.critic], self.policy.features(states))
 
     def _on_step_transition(self, transitions: Transitions) -> None:
         """One CACLA update on the transition(s) of the last step (BN in eval mode, see the class docstring)."""

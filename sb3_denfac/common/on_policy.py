@@ -29,7 +29,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
 from sb3_denfac.common.checks import InputChecksMixin
-from sb3_denfac.common.networks import create_bn_mlp, has_batch_norm, reset_parameters_
+from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 
@@ -162,6 +162,31 @@ class DeterministicActorValuePolicy(BasePolicy):
         if deterministic:
             return th.clamp(mean, -1.0, 1.0)
         return th.as_tensor(self.explore(mean.cpu().numpy()), device=mean.device)
+
+
+@th.no_grad()
+def refresh_bn_statistics(nets: list[nn.Module], inputs: th.Tensor, exact_when_fresh: bool = False) -> None:
+    """Update the running statistics of the BN layers of ``nets`` with one gradient-free train-mode forward of ``inputs``.
+
+    The statistics move toward those of ``inputs`` with each layer's momentum; with ``exact_when_fresh``, a layer that
+    has never seen a batch (new or re-initialised network) takes them as they are. Needs at least two inputs.
+    """
+    if len(inputs) < 2:
+        return
+    for net in nets:
+        fresh = [
+            m
+            for m in net.modules()
+            if exact_when_fresh and isinstance(m, nn.modules.batchnorm._BatchNorm) and m.num_batches_tracked == 0
+        ]
+        momenta = [m.momentum for m in fresh]
+        for layer in fresh:
+            layer.momentum = 1.0
+        set_bn_training_mode(net, True)
+        net(inputs)
+        set_bn_training_mode(net, False)
+        for layer, momentum in zip(fresh, momenta, strict=True):
+            layer.momentum = momentum
 
 
 def td_targets(rewards: th.Tensor, next_values: th.Tensor, terminals: th.Tensor, gamma: float) -> th.Tensor:
@@ -321,7 +346,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
             **self.policy_kwargs,
         )
         self.policy = self.policy.to(self.device)
-        self.policy.set_training_mode(False)  # BN in train mode only inside the gradient steps
+        self.policy.set_training_mode(False)  # BN layers normalise with their running statistics, see refresh_bn_statistics
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.actor_optimizer", "policy.critic_optimizer"], []
@@ -340,10 +365,6 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
         if self.max_grad_norm is not None:
             th.nn.utils.clip_grad_norm_(net.parameters(), self.max_grad_norm)
         optimizer.step()
-
-    def _min_batch(self) -> int:
-        """Smallest batch a train-mode batch-norm forward accepts."""
-        return 2 if has_batch_norm(self.policy) else 1
 
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
         raise NotImplementedError

@@ -14,6 +14,7 @@ from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
     check_positive,
+    refresh_bn_statistics,
     td_targets,
 )
 from sb3_denfac.nfac.policies import MlpPolicy, NFACPolicy
@@ -34,13 +35,16 @@ class NFAC(DeterministicOnPolicyAlgorithm):
       delta > 0, the behaviour mean mu_b(s) elsewhere if ``update_delta_neg`` (else those samples are dropped);
       ``actor_steps`` full-batch Adam steps (rate alpha_a) on mean ||mu(s) - target||^2.
 
-    Exploration is the paper's truncated Gaussian N(mu(s), sigma^2) on the [-1, 1]-scaled action space. Batch norm
-    (policy_kwargs ``batch_norm``, on by default: "NFAC+") normalises with the statistics of the whole batch during the
-    gradient steps (train mode); targets, TD errors, acting and ``predict`` use the running statistics (eval mode),
-    which follow the batches with policy_kwargs ``bn_momentum`` (with ``reset_critic`` and few ``critic_steps`` they
-    lag behind: raise ``bn_momentum``). A batch-normalised update needs at least two samples: a one-step rollout, or a
-    single positive TD error without ``update_delta_neg``, skips that update. Episodes that end on a time limit are
-    bootstrapped from V of their last observation; only true terminations give y = r.
+    Exploration is the paper's truncated Gaussian N(mu(s), sigma^2) on the [-1, 1]-scaled action space. Episodes that
+    end on a time limit are bootstrapped from V of their last observation; only true terminations give y = r.
+
+    Batch norm ("NFAC+", policy_kwargs ``batch_norm=True``, the default) uses the same rule as CACLA+: every gradient
+    step normalises with the running statistics (BN in eval mode), which are refreshed at the start of each update by a
+    gradient-free train-mode forward of the states of D (momentum ``bn_momentum``; a new or re-initialised network,
+    e.g. after ``reset_critic``, takes the statistics of D as they are). The function that is fitted is then exactly
+    the one that computes the targets, the TD errors and the actions. (Train-mode BN on the batch of one short episode,
+    and on the positive-delta subset for the actor, learns a function of batch-normalised inputs whose scale does not
+    carry over to eval mode: on a 10-step task the learned actions were several times worse.)
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
     :param env: environment or its registered id; a single environment (episode-wise updates).
@@ -148,15 +152,13 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         """K fitted rounds of V on y = r + gamma V_{k-1}(s'); returns the last loss."""
         loss = th.zeros(())
         for _ in range(self.n_fitted_iterations):
-            self.policy.set_training_mode(False)
             targets = self._td_targets(data)  # computed before the optional reset, as the authors
             if self.reset_critic:
                 self.policy.reset_critic()  # new weights, BN statistics and Adam state; same learning rate
-            self.policy.critic.train()  # batch statistics of the whole batch
+                refresh_bn_statistics([self.policy.critic], self.policy.features(data.observations), exact_when_fresh=True)
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
                 self._gradient_step(loss, self.policy.critic, self.policy.critic_optimizer)
-        self.policy.set_training_mode(False)
         return loss.item()
 
     def actor_targets(self, data: Transitions) -> tuple[th.Tensor, th.Tensor, float]:
@@ -164,7 +166,6 @@ class NFAC(DeterministicOnPolicyAlgorithm):
 
         :return: (mask of the samples used, their regression targets, fraction of positive TD errors).
         """
-        self.policy.set_training_mode(False)
         with th.no_grad():
             delta = self._td_targets(data) - self.policy.predict_values(data.observations).flatten()
         positive = delta > 0
@@ -179,23 +180,22 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         """``actor_steps`` full-batch Adam steps of mu(s) toward the CACLA targets; returns (loss, positive fraction)."""
         mask, targets, positive_fraction = self.actor_targets(data)
         loss = float("nan")
-        if len(targets) >= self._min_batch():
+        if len(targets) > 0:
             observations = data.observations[mask]
-            self.policy.actor.train()
             for _ in range(self.actor_steps):
                 actor_loss = F.mse_loss(self.policy.actor_mean(observations), targets)
                 self._gradient_step(actor_loss, self.policy.actor, self.policy.actor_optimizer)
             loss = actor_loss.item()
-            self.policy.set_training_mode(False)
         return loss, positive_fraction
 
     def train(self) -> None:
         """One NFAC update on the collected episode(s)."""
-        if len(self.rollout_buffer) < self._min_batch():
-            return  # a single transition cannot be batch-normalised
         start = time.perf_counter()
         self._update_learning_rates()
         data = self.rollout_buffer.get(self.device)
+        self.policy.set_training_mode(False)  # gradient steps with BN in eval mode, see the class docstring
+        features = self.policy.features(data.observations)
+        refresh_bn_statistics([self.policy.actor, self.policy.critic], features, exact_when_fresh=True)
         if self.update_critic_first:
             critic_loss = self.fit_critic(data)
             actor_loss, positive_fraction = self.update_actor(data)
