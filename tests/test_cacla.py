@@ -17,15 +17,17 @@ from sb3_denfac.common.on_policy import Transitions
 
 
 class TargetEnv(gym.Env):
-    """Random observations around ``offset``, reward -(a - target)^2, episodes truncated after ``ep_len`` steps."""
+    """Random observations s around ``offset``, reward -(a - target - slope * s_0)^2, episodes truncated after
+    ``ep_len`` steps."""
 
-    def __init__(self, target: float = 0.5, ep_len: int = 10, offset: float = 0.0):
+    def __init__(self, target: float = 0.5, ep_len: int = 10, offset: float = 0.0, slope: float = 0.0):
         self.observation_space = spaces.Box(-10.0, 10.0, (2,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
-        self.target, self.ep_len, self.offset = target, ep_len, offset
+        self.target, self.ep_len, self.offset, self.slope = target, ep_len, offset, slope
 
     def _obs(self):
-        return (self.offset + self.np_random.uniform(-1, 1, 2)).astype(np.float32)
+        self.obs = (self.offset + self.np_random.uniform(-1, 1, 2)).astype(np.float32)
+        return self.obs
 
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
@@ -34,7 +36,8 @@ class TargetEnv(gym.Env):
 
     def step(self, action):
         self.t += 1
-        return self._obs(), -float((np.asarray(action)[0] - self.target) ** 2), False, self.t >= self.ep_len, {}
+        reward = -float((np.asarray(action)[0] - self.target - self.slope * (self.obs[0] - self.offset)) ** 2)
+        return self._obs(), reward, False, self.t >= self.ep_len, {}
 
 
 OBS = np.random.default_rng(0).uniform(-1, 1, (16, 2)).astype(np.float32)
@@ -66,6 +69,15 @@ def test_cacla_learns_target_action(batch_norm):
     after = abs(mean_action(model) - 0.5)
     assert before > 0.45
     assert after < 0.25, (before, after)
+
+
+def test_cacla_plus_learns_state_dependent_action():
+    """a*(s) = 0.8 s_0: batch norm must not distort the dependence of mu on the state."""
+    model = CACLA("MlpPolicy", TargetEnv(target=0.0, slope=0.8), learning_rate=1e-2, gamma=0.5, seed=0)
+    model.learn(1500)
+    actions = model.predict(OBS, deterministic=True)[0][:, 0]
+    assert np.corrcoef(actions, OBS[:, 0])[0, 1] > 0.9
+    assert np.mean((actions - 0.8 * OBS[:, 0]) ** 2) < 0.05  # 0.21 for mu = 0
 
 
 def test_online_update_rule():
