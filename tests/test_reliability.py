@@ -202,10 +202,31 @@ def test_finite_inputs_mixin_catches_nan_actions() -> None:
         model.learn(10)
 
 
-def test_env_required_mixin(tmp_path: pathlib.Path) -> None:
+def test_learn_checks_mixin(tmp_path: pathlib.Path) -> None:
     _checked_td3(make_env()).save(tmp_path / "model.zip")
     model = CheckedTD3.load(tmp_path / "model.zip")
     with pytest.raises(ValueError, match=r"CheckedTD3.learn\(\) needs an environment"):
+        model.learn(10)
+
+
+def test_learn_checks_mixin_replay_buffer(tmp_path: pathlib.Path) -> None:
+    from sb3_denfac.denfac.buffers import DENFACReplayBuffer
+
+    class CheckedTD3WithOwnBuffer(CheckedTD3):
+        pass
+
+    sac = SAC("MlpPolicy", make_env(), learning_starts=5, policy_kwargs=dict(net_arch=[4]))
+    sac.learn(10)
+    sac.save_replay_buffer(tmp_path / "pendulum.pkl")
+    model = CheckedTD3WithOwnBuffer("MlpPolicy", make_env(), replay_buffer_class=DENFACReplayBuffer)
+    model.load_replay_buffer(tmp_path / "pendulum.pkl")
+    with pytest.raises(ValueError, match="is a ReplayBuffer, it needs a DENFACReplayBuffer"):
+        model.learn(10)
+
+    cartpole = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=EPISODE, episode_length=EPISODE)
+    model = _checked_td3(cartpole)
+    model.load_replay_buffer(tmp_path / "pendulum.pkl")
+    with pytest.raises(ValueError, match=r"observation shape \(3,\).*does not fit.*observation shape \(4,\)"):
         model.learn(10)
 
 
@@ -351,6 +372,26 @@ def test_foreign_zip(tmp_path: pathlib.Path, name: str) -> None:
     other_model.save(tmp_path / "other.zip")
     with pytest.raises(ValueError, match=type(other_model.policy).__name__):
         cls.load(tmp_path / "other.zip", env=make_env())
+
+
+@pytest.mark.parametrize("name", OFF_POLICY)
+def test_foreign_replay_buffer(tmp_path: pathlib.Path, name: str) -> None:
+    """A replay buffer of another env (or, for DENFAC, of an algorithm without behaviour means) is refused clearly."""
+    cartpole = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=EPISODE, episode_length=EPISODE)
+    other = make_model(name, env=cartpole)
+    other.learn(EPISODE)
+    other.save_replay_buffer(tmp_path / "cartpole.pkl")
+    model = make_model(name)
+    model.load_replay_buffer(tmp_path / "cartpole.pkl")
+    with pytest.raises(ValueError, match="does not fit"):
+        model.learn(EPISODE)
+    if name.startswith("denfac"):
+        ddpg = make_model("ddpg")
+        ddpg.learn(EPISODE)
+        ddpg.save_replay_buffer(tmp_path / "ddpg.pkl")
+        model.load_replay_buffer(tmp_path / "ddpg.pkl")
+        with pytest.raises(ValueError, match="needs a DENFACReplayBuffer"):
+            model.learn(EPISODE)
 
 
 # ----- nothing lost: save and resume ----------------------------------------------------------------------------------

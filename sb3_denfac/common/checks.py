@@ -7,7 +7,8 @@
 - :class:`ModelFileCheckMixin` makes ``load`` refuse, with a ``ValueError`` naming the problem, a truncated or corrupted
   model zip (SB3 itself only asserts "No data found") and a zip that another algorithm saved (e.g. a TD3 zip given to
   ``DENFAC.load``, which SB3 would let fail somewhere inside ``_setup_model``).
-- :class:`EnvRequiredMixin` makes ``learn`` without an environment a ``ValueError`` saying how to give one.
+- :class:`LearnChecksMixin` makes ``learn`` without an environment, or with a replay buffer of another algorithm or
+  environment (``load_replay_buffer``), a ``ValueError`` saying so.
 - :class:`InputChecksMixin` is all three; add it as the FIRST base of an algorithm class::
 
       class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm): ...
@@ -22,6 +23,7 @@ from typing import Any
 
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import get_action_dim, get_obs_shape
 from stable_baselines3.common.save_util import json_to_data
 from stable_baselines3.common.type_aliases import GymEnv
 from stable_baselines3.common.vec_env import VecCheckNan, VecEnv, VecEnvWrapper
@@ -128,9 +130,36 @@ class ModelFileCheckMixin:
         return super().load(path, *args, **kwargs)  # type: ignore[misc]
 
 
-class EnvRequiredMixin:
-    """``learn`` without an environment (e.g. after ``load(path)`` without ``env=``) raises a ``ValueError`` that says
-    what to do, instead of SB3's bare ``assert self.env is not None`` (on-policy and custom algorithms)."""
+def check_replay_buffer(model: Any) -> None:
+    """Raise a ``ValueError`` if an off-policy ``model``'s replay buffer does not fit it (e.g. a buffer loaded with
+    ``load_replay_buffer`` from another algorithm, env or number of envs); no-op without a replay buffer."""
+    buffer = getattr(model, "replay_buffer", None)
+    if buffer is None:
+        return
+    name = type(model).__name__
+    expected = getattr(model, "replay_buffer_class", None)
+    if isinstance(expected, type) and not isinstance(buffer, expected):
+        raise ValueError(
+            f"{name}'s replay buffer is a {type(buffer).__name__}, it needs a {expected.__name__}: "
+            "was it saved by another algorithm?"
+        )
+    fits = (
+        getattr(buffer, "obs_shape", None) == get_obs_shape(model.observation_space)
+        and getattr(buffer, "action_dim", None) == get_action_dim(model.action_space)
+        and (model.env is None or getattr(buffer, "n_envs", None) == model.n_envs)
+    )
+    if not fits:
+        raise ValueError(
+            f"{name}'s replay buffer (observation shape {getattr(buffer, 'obs_shape', None)}, action dim "
+            f"{getattr(buffer, 'action_dim', None)}, n_envs {getattr(buffer, 'n_envs', None)}) does not fit the model "
+            f"(observation shape {get_obs_shape(model.observation_space)}, action dim {get_action_dim(model.action_space)}"
+            f", n_envs {model.n_envs}): was it saved for another environment?"
+        )
+
+
+class LearnChecksMixin:
+    """Checks at the start of ``learn``: an environment is set (instead of SB3's bare ``assert self.env is not None``,
+    e.g. after ``load(path)`` without ``env=``) and the replay buffer fits (:func:`check_replay_buffer`)."""
 
     env: VecEnv | None
 
@@ -138,8 +167,9 @@ class EnvRequiredMixin:
         if self.env is None:
             name = type(self).__name__
             raise ValueError(f"{name}.learn() needs an environment: pass env= to {name}.load(...) or call set_env(env) first")
+        check_replay_buffer(self)
         return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
 
 
-class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, EnvRequiredMixin):
+class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
     """All checks of this module; put it first in an algorithm's bases."""
