@@ -174,7 +174,8 @@ def matmul_gflops(size: int = 1024, repeats: int = 10) -> float:
 
 
 # ----- (c) SB3 DDPG ---------------------------------------------------------------------------------------------------
-def ddpg_episode_time(cfg: dict, repeats: int) -> float:
+def ddpg_episode(cfg: dict):
+    """A callable running SB3 DDPG's train() for one episode's worth of data."""
     from stable_baselines3 import DDPG
     from stable_baselines3.common.logger import configure
 
@@ -193,11 +194,12 @@ def ddpg_episode_time(cfg: dict, repeats: int) -> float:
     rb = model.replay_buffer
     rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
     rb.rewards[:, 0], rb.dones[:, 0], rb.full = data["rewards"][:, 0], data["dones"][:, 0], True
-    return median_time(lambda: model.train(gradient_steps=EPISODE_STEPS, batch_size=64), repeats)
+    return lambda: model.train(gradient_steps=EPISODE_STEPS, batch_size=64)
 
 
-def denfac_update_time(cfg: dict, path: str, repeats: int) -> tuple[float, float]:
-    """Median time of one update and the time of the first one (includes torch.compile for path="compiled")."""
+def denfac_update(cfg: dict, path: str):
+    """A callable running one DENFAC update on a full buffer of random data, and the first update's time (which
+    includes torch.compile for path="compiled")."""
     from stable_baselines3.common.logger import configure
 
     from sb3_denfac.denfac import DENFAC
@@ -227,8 +229,7 @@ def denfac_update_time(cfg: dict, path: str, repeats: int) -> tuple[float, float
     rb.full = True
     start = time.perf_counter()
     model._update()
-    first = time.perf_counter() - start
-    return median_time(model._update, repeats), first
+    return model._update, time.perf_counter() - start
 
 
 def main() -> None:
@@ -255,16 +256,31 @@ def main() -> None:
     for name in args.settings:
         cfg = SETTINGS[name]
         gflops_before = matmul_gflops()
-        compiled, compile_first = denfac_update_time(cfg, "compiled", args.repeats)
-        fast, _ = denfac_update_time(cfg, "fast", args.repeats)
-        plain, _ = denfac_update_time(cfg, "plain", max(1, args.repeats // 2))
+        compiled_fn, compile_first = denfac_update(cfg, "compiled")
+        fast_fn, _ = denfac_update(cfg, "fast")
+        plain_fn, _ = denfac_update(cfg, "plain")
         data = {k: th.as_tensor(v) for k, v in random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]).items()}
         nets = dict(
             actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
             critic=reference_mlp(cfg["obs_dim"] + cfg["action_dim"], 1, cfg["qf"]),
         )
-        reference = median_time(lambda d=data, c=cfg, n=nets: reference_update(d, c, n), max(1, args.repeats // 2))
-        ddpg = ddpg_episode_time(cfg, max(1, args.repeats // 2))
+        variants = dict(
+            compiled=compiled_fn,
+            fast=fast_fn,
+            plain=plain_fn,
+            reference=lambda d=data, c=cfg, n=nets: reference_update(d, c, n),
+            ddpg=ddpg_episode(cfg),
+        )
+        # Interleaved: every repeat times each variant back to back, so load changes on the shared machine hit all.
+        times: dict[str, list[float]] = {k: [] for k in variants}
+        for fn in variants.values():
+            fn()  # warm-up
+        for _ in range(args.repeats):
+            for key, fn in variants.items():
+                start = time.perf_counter()
+                fn()
+                times[key].append(time.perf_counter() - start)
+        compiled, fast, plain, reference, ddpg = (float(np.median(times[k])) for k in variants)
         gflops = max(gflops_before, matmul_gflops())
         flops = update_flops(cfg)
         floor = flops / (gflops * 1e9)
@@ -286,6 +302,7 @@ def main() -> None:
             fast_over_floor=fast / floor,
             plain_speedup_vs_reference=reference / plain,
             compiled_over_ddpg_episode=compiled / ddpg,
+            times_s=times,
         )
         print(name, json.dumps(results["settings"][name], indent=1), flush=True)
     results["meta"]["load_average_end"] = os.getloadavg()
@@ -295,7 +312,7 @@ def main() -> None:
         "# Cost of one DENFAC update (K=10, critic_steps=10, G=25, full batch)",
         "",
         f"{results['meta']['machine']}; torch {th.__version__}, {args.threads} thread(s); medians of {args.repeats} "
-        f"(fast) / {max(1, args.repeats // 2)} (others) repeats; load average {results['meta']['load_average'][0]:.1f} "
+        f"interleaved repeats; load average {results['meta']['load_average'][0]:.1f} "
         f"at start, {results['meta']['load_average_end'][0]:.1f} at end.",
         "",
         "| setting | D | compiled (s) | fast (s) | plain (s) | reference (s) | floor (s) | GFLOP/update | matmul GFLOP/s "

@@ -86,9 +86,9 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
     :param update_path: "auto" (default: "fast" when the policy allows it, else "plain"), "fast" (hand-written
-        flat-parameter steps, eager), "compiled" (the same steps through ``torch.compile``: fastest for long runs, but
-        the first update of a process pays a compilation of about a minute) or "plain" (autograd on the modules). All
-        compute the same update up to float rounding (tested for "fast"); see ``fast.py``.
+        flat-parameter steps, eager), "compiled" (the same steps through ``torch.compile`` once the buffer is full:
+        fastest for long runs; the first full-buffer update of a process pays the compilation, seconds to a minute)
+        or "plain" (autograd on the modules). All compute the same update up to float rounding; see ``fast.py``.
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -344,7 +344,10 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
                     f"update_path={self.update_path!r} needs vector observations, the default MLP networks and Adam"
                 )
             return None
-        return FastUpdate(self.policy, *layers, compiled=self.update_path == "compiled")
+        compiled_size = None
+        if self.update_path == "compiled":  # the sample count that repeats: full buffer or mini-batch
+            compiled_size = self.replay_buffer.buffer_size if self.batch_size is None else self.batch_size
+        return FastUpdate(self.policy, *layers, compiled_size=compiled_size)
 
     def _update(self) -> None:
         """One end-of-episode update: Algorithm 1 with K fitted iterations over the whole buffer D."""

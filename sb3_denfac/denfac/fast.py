@@ -11,8 +11,9 @@ memory passes dominate, not FLOPs. Each critic step and each actor step is one p
   reductions the weight-gradient matmul already computes (one extra ``addcmul`` pass per BN layer);
 - hand-written backward (no autograd graph); the critic's input layer in eval mode is split into an observation part,
   computed once per fitted iteration, and an action part for the G actor steps;
-- ``update_path="compiled"`` runs the same step functions through ``torch.compile`` (one compilation per process and
-  network shape, dynamic in N), which fuses the element-wise passes around the matmuls.
+- ``update_path="compiled"`` runs the same step functions through ``torch.compile`` with static shapes for the sample
+  count that repeats (the full buffer, or the mini-batch size), which fuses the element-wise passes around the matmuls;
+  while the buffer fills, the eager step functions run (a static compilation per N would be paid every episode).
 
 Running statistics, Adam moments and the step count follow PyTorch's ``BatchNorm1d`` and ``Adam`` exactly (up to float
 rounding), so the fast and plain paths give the same result for the same seed (tested). Everything stays on the
@@ -245,17 +246,24 @@ def _make_actor_step(
     return actor_step
 
 
-_COMPILED: dict = {}
+_STEP_FUNCTIONS: dict = {}
 
 
-def _step_function(kind: str, compiled: bool, *key):
-    """The (optionally torch.compile'd) step function for a static key; compiled ones are cached per process."""
-    factory = _make_critic_step if kind == "critic" else _make_actor_step
-    if not compiled:
-        return factory(*key)
-    if (kind, key) not in _COMPILED:
-        _COMPILED[(kind, key)] = th.compile(factory(*key, fuse=True), dynamic=True)
-    return _COMPILED[(kind, key)]
+def _step_function(kind: str, compiled_size: int | None, *key):
+    """The step function for a static key: eager, or ``torch.compile``d for the fixed sample count ``compiled_size``.
+
+    Compiled functions are specialised to one N (static shapes generate much faster code than dynamic ones), so they
+    are used only for the size that repeats: the full buffer (or the mini-batch size); a filling buffer runs eagerly.
+    Cached per process, so the compilation is paid once.
+    """
+    cache_key = (kind, compiled_size, key)
+    if cache_key not in _STEP_FUNCTIONS:
+        factory = _make_critic_step if kind == "critic" else _make_actor_step
+        if compiled_size is None:
+            _STEP_FUNCTIONS[cache_key] = factory(*key)
+        else:
+            _STEP_FUNCTIONS[cache_key] = th.compile(factory(*key, fuse=True), dynamic=False)
+    return _STEP_FUNCTIONS[cache_key]
 
 
 class _FlatNet:
@@ -362,10 +370,14 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
 class FastUpdate:
     """Critic fit and actor fit of one DENFAC update with the step functions above (eager or compiled)."""
 
-    def __init__(self, policy, actor_layers: list[_Layer], critic_layers: list[_Layer], compiled: bool = False):
+    def __init__(self, policy, actor_layers: list[_Layer], critic_layers: list[_Layer], compiled_size: int | None = None):
+        """``compiled_size``: sample count N whose steps run compiled (None: all eager)."""
         self.actor = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
         self.critic = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
-        self.compiled = compiled
+        self.compiled_size = compiled_size
+
+    def _size_key(self, n: int) -> int | None:
+        return n if n == self.compiled_size else None
 
     def write_back(self) -> None:
         self.actor.write_back()
@@ -384,7 +396,6 @@ class FastUpdate:
     ) -> th.Tensor:
         """``steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2; returns the last loss (a tensor, no host sync)."""
         net = self.critic
-        step = _step_function("critic", self.compiled, net.spec, net.betas, net.eps, max_grad_norm)
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         full_stats = row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
@@ -392,6 +403,7 @@ class FastUpdate:
         for _ in range(steps):
             idx = batch_indices(inputs.shape[1])
             x, q, c = (inputs, q_t, c_t) if idx is None else (inputs[:, idx], q_t[:, idx], c_t[:, idx])
+            step = _step_function("critic", self._size_key(x.shape[1]), net.spec, net.betas, net.eps, max_grad_norm)
             loss, stats = step(
                 net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), x, full_stats if idx is None else None, q, c
             )
@@ -402,9 +414,6 @@ class FastUpdate:
     def fit_actor(self, obs: th.Tensor, steps: int, max_grad_norm: float | None, inverting: bool, batch_indices) -> th.Tensor:
         """G Adam steps ascending 1/N sum Q(s, pi(s)) (critic in eval mode); returns the last objective."""
         net = self.actor
-        step = _step_function(
-            "actor", self.compiled, net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting
-        )
         obs_t = obs.float().t().contiguous()
         action_dim = net.spec.sizes[-1]
         critic_affines = self.critic.eval_affines()
@@ -415,6 +424,8 @@ class FastUpdate:
         for _ in range(steps):
             idx = batch_indices(obs_t.shape[1])
             o, obs_part = (obs_t, obs_part_full) if idx is None else (obs_t[:, idx], obs_part_full[:, idx])
+            key = (net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting)
+            step = _step_function("actor", self._size_key(o.shape[1]), *key)
             objective, stats = step(
                 net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), o, obs_part, w_act, critic_affines
             )
