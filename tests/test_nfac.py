@@ -15,27 +15,37 @@ from sb3_denfac.nfac import NFAC
 
 
 class TargetEnv(gym.Env):
-    """Random 2-d observations, reward -(a - target)^2 per step, episodes truncated (time limit) after ``ep_len`` steps.
+    """Random 2-d observations s, reward -(a - target - slope * s_0)^2 per step, episodes truncated (time limit) after
+    ``ep_len`` steps (or terminated if ``terminate``).
 
-    The optimal deterministic action is ``target`` in every state; V is stationary because episodes end by truncation.
+    The optimal deterministic action is ``target + slope * s_0``; V is stationary because episodes end by truncation.
     """
 
-    def __init__(self, target: float = 0.5, ep_len: int = 10, low: float = -1.0, high: float = 1.0, terminate: bool = False):
+    def __init__(
+        self,
+        target: float = 0.5,
+        ep_len: int = 10,
+        low: float = -1.0,
+        high: float = 1.0,
+        terminate: bool = False,
+        slope: float = 0.0,
+    ):
         self.observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.action_space = spaces.Box(np.float32(low), np.float32(high), (1,), np.float32)
-        self.target, self.ep_len, self.terminate = target, ep_len, terminate
+        self.target, self.ep_len, self.terminate, self.slope = target, ep_len, terminate, slope
 
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
         self.t = 0
-        return self.np_random.uniform(-1, 1, 2).astype(np.float32), {}
+        self.obs = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+        return self.obs, {}
 
     def step(self, action):
         self.t += 1
-        reward = -float((np.asarray(action)[0] - self.target) ** 2)
+        reward = -float((np.asarray(action)[0] - self.target - self.slope * self.obs[0]) ** 2)
         end = self.t >= self.ep_len
-        obs = self.np_random.uniform(-1, 1, 2).astype(np.float32)
-        return obs, reward, end and self.terminate, end and not self.terminate, {}
+        self.obs = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+        return self.obs, reward, end and self.terminate, end and not self.terminate, {}
 
 
 OBS = np.random.default_rng(0).uniform(-1, 1, (16, 2)).astype(np.float32)
@@ -60,6 +70,16 @@ def test_nfac_learns_target_action(kwargs, tolerance):
     after = abs(mean_action(model) - 0.5)
     assert before > 0.45  # paper initialisation: mu(s) ~ 0
     assert after < tolerance, (before, after)
+
+
+def test_nfac_plus_learns_state_dependent_action():
+    """a*(s) = 0.8 s_0 with the default K = 10 rounds: batch norm must not distort the dependence of mu on the state
+    (train-mode BN on the 10-transition batches and the positive-delta subsets failed this)."""
+    model = NFAC("MlpPolicy", TargetEnv(target=0.0, slope=0.8), learning_rate=1e-2, gamma=0.5, seed=0)
+    model.learn(2000)
+    actions = model.predict(OBS, deterministic=True)[0][:, 0]
+    assert np.corrcoef(actions, OBS[:, 0])[0, 1] > 0.9
+    assert np.mean((actions - 0.8 * OBS[:, 0]) ** 2) < 0.05  # 0.21 for mu = 0
 
 
 def test_actor_selection_rule_positive_td():
