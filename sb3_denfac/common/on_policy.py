@@ -9,6 +9,11 @@ Time limits: unlike SB3's ``collect_rollouts`` (which adds gamma * V(terminal ob
 true last observation of a truncated episode is stored as s' with ``terminal = False``, so the TD target
 r + gamma * V(s') bootstraps from it with the critic of the moment the target is computed. Only true terminations
 (``terminated`` in Gymnasium, the authors' ``goal_reached``) stop the bootstrap.
+
+Batch norm ("NFAC+", "CACLA+"): the policy stays in eval mode, also during the gradient steps, so BN layers normalise
+with their running statistics; those are refreshed from recent states by :func:`refresh_bn_statistics` (NFAC: the states
+of the episode(s) D before each update; CACLA: a window of the last steps before each per-step update). A batch of one
+is then well defined, and the function that is fitted is exactly the one that computes targets and acts.
 """
 
 from __future__ import annotations
