@@ -22,7 +22,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecNormalize
 from test_conformance import ALGOS, EPISODE, OFF_POLICY, algo_class, assert_same_parameters, make_env, make_model
 
-from sb3_denfac.common.checks import InputChecksMixin, wrap_check_finite
+from sb3_denfac.common.checks import FiniteCheckWrapper, InputChecksMixin, wrap_check_finite
 
 #: Algorithms that learn from whole episodes of a single environment.
 EPISODE_WISE = ["denfac", "denfac_plain", "nfac", "cmaes"]
@@ -172,13 +172,15 @@ def test_finite_inputs_mixin(where: str, value: float, message: str) -> None:
 
 
 def test_finite_inputs_mixin_wraps_every_env(tmp_path: pathlib.Path) -> None:
-    vec_normalize = VecNormalize(DummyVecEnv([make_env]))
+    vec_normalize = VecNormalize(DummyVecEnv([make_env, make_env]))
     model = _checked_td3(vec_normalize)
-    assert isinstance(model.env, VecCheckNan) and model.env.raise_exception
-    assert model.get_vec_normalize_env() is vec_normalize  # the check sits outside VecNormalize, which is still found
+    assert model.get_env() is vec_normalize  # the VecEnv keeps its type: each sub-env is checked in place
+    assert all(isinstance(sub_env, FiniteCheckWrapper) for sub_env in vec_normalize.venv.envs)
+    assert model.get_env().get_attr("spec")[0].max_episode_steps == EPISODE  # attributes still reach the env
 
     model.set_env(model.get_env(), force_reset=False)
-    assert not isinstance(model.env.venv, VecCheckNan), "wrapped twice"
+    assert not any(isinstance(sub_env.env, FiniteCheckWrapper) for sub_env in vec_normalize.venv.envs), "wrapped twice"
+    model = _checked_td3(make_env())
     model.set_env(CorruptingWrapper(make_env(), "reward", np.nan))
     with pytest.raises(ValueError, match="found nan in rewards"):
         model.learn(EPISODE)
@@ -189,7 +191,34 @@ def test_finite_inputs_mixin_wraps_every_env(tmp_path: pathlib.Path) -> None:
         loaded.learn(EPISODE)
 
     warning_only = VecCheckNan(DummyVecEnv([make_env]), raise_exception=False)
-    assert isinstance(wrap_check_finite(warning_only).venv, VecCheckNan)  # a warning-only check is not enough
+    assert wrap_check_finite(warning_only) is warning_only  # a warning-only check is not enough: sub-envs are checked
+    assert isinstance(warning_only.venv.envs[0], FiniteCheckWrapper)
+
+
+def test_finite_inputs_mixin_other_vec_envs() -> None:
+    """VecEnvs whose sub-envs live elsewhere (SubprocVecEnv) get SB3's VecCheckNan(raise_exception=True)."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    env = SubprocVecEnv([lambda: CorruptingWrapper(make_env(), "reward", np.inf)], start_method="fork")
+    try:
+        model = _checked_td3(env)
+        assert isinstance(model.get_env(), VecCheckNan) and model.get_env().raise_exception
+        with pytest.raises(ValueError, match="found inf in rewards"):
+            model.learn(EPISODE)
+    finally:
+        env.close()
+
+
+def test_finite_inputs_mixin_keeps_eval_callback_quiet() -> None:
+    """SB3's EvalCallback warns when the training and eval envs differ in type: the check must not cause that."""
+    import warnings
+
+    from stable_baselines3.common.callbacks import EvalCallback
+
+    model = _checked_td3(make_env())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        model.learn(EPISODE, callback=EvalCallback(make_env(), eval_freq=EPISODE, n_eval_episodes=1, warn=False))
 
 
 def test_finite_inputs_mixin_catches_nan_actions() -> None:

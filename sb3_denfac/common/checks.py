@@ -1,9 +1,10 @@
 """Input checks shared by the package's algorithms, built on SB3's own tooling.
 
-- :class:`FiniteInputsMixin` wraps every environment an algorithm is given (constructor, ``set_env``, ``load(env=...)``)
-  in SB3's :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True``: a NaN or inf in an
-  observation (at reset or step), a reward or an action raises a ``ValueError`` naming which (``found nan in rewards``,
-  ``found inf in observations``...) instead of silently turning the networks' weights into NaN.
+- :class:`FiniteInputsMixin` checks every environment an algorithm is given (constructor, ``set_env``,
+  ``load(env=...)``): a NaN or inf in an observation (at reset or step), a reward or an action raises a ``ValueError``
+  naming which (``found nan in rewards``, ``found inf in observations``...) instead of silently turning the networks'
+  weights into NaN. In-process envs get a gym-level :class:`FiniteCheckWrapper` per sub-env, other VecEnvs SB3's
+  :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True`` (see :func:`wrap_check_finite`).
 - :class:`ModelFileCheckMixin` makes ``load`` refuse, with a ``ValueError`` naming the problem, a truncated or corrupted
   model zip (SB3 itself only asserts "No data found") and a zip that another algorithm saved (e.g. a TD3 zip given to
   ``DENFAC.load``, which SB3 would let fail somewhere inside ``_setup_model``).
@@ -19,38 +20,94 @@ from __future__ import annotations
 import json
 import pathlib
 import zipfile
-from typing import Any
+from typing import Any, SupportsFloat
 
+import gymnasium as gym
+import numpy as np
 from gymnasium import spaces
+from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.preprocessing import get_action_dim, get_obs_shape
 from stable_baselines3.common.save_util import json_to_data
 from stable_baselines3.common.type_aliases import GymEnv
-from stable_baselines3.common.vec_env import VecCheckNan, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecEnv, VecEnvWrapper
 
 
-def has_raising_nan_check(env: VecEnv) -> bool:
-    """True if a ``VecCheckNan(raise_exception=True)`` is somewhere in the VecEnv wrapper chain."""
+def _non_finite(name: str, value: Any) -> list[str]:
+    """``["nan in <name>", ...]`` for the non-finite entries of a (possibly dict / tuple) numeric value."""
+    if isinstance(value, dict):
+        return [issue for key, item in value.items() for issue in _non_finite(f"{name}.{key}", item)]
+    if isinstance(value, tuple):
+        return [issue for index, item in enumerate(value) for issue in _non_finite(f"{name}.{index}", item)]
+    array = np.asarray(value)
+    if array.dtype.kind not in "fc":  # integers and booleans are always finite
+        return []
+    return [f"{kind} in {name}" for kind, test in (("inf", np.isinf), ("nan", np.isnan)) if test(array).any()]
+
+
+class FiniteCheckWrapper(gym.Wrapper):
+    """Raise a ``ValueError`` when the wrapped env returns a NaN/inf observation or reward, or is given a NaN/inf action.
+
+    The message reads as SB3's ``VecCheckNan`` ("found nan in rewards, ...") and says where the value came from.
+    """
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict]:
+        observation, info = self.env.reset(**kwargs)
+        self._raise_if_any(_non_finite("observations", observation), "the environment observation (at reset)")
+        return observation, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict]:
+        self._raise_if_any(_non_finite("actions", action), "the RL model (the action it gave the environment)")
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        issues = _non_finite("observations", observation) + _non_finite("rewards", reward)
+        self._raise_if_any(issues, f"the environment, after the action {action}")
+        return observation, reward, terminated, truncated, info
+
+    @staticmethod
+    def _raise_if_any(issues: list[str], origin: str) -> None:
+        if issues:
+            raise ValueError(f"found {', found '.join(issues)}. Originated from {origin}")
+
+
+def _base_vec_env(env: VecEnv) -> VecEnv:
     while isinstance(env, VecEnvWrapper):
-        if isinstance(env, VecCheckNan) and env.raise_exception:
-            return True
         env = env.venv
-    return False
+    return env
+
+
+def has_finite_check(env: VecEnv) -> bool:
+    """True if every sub-env carries a :class:`FiniteCheckWrapper` or a raising ``VecCheckNan`` wraps the VecEnv."""
+    node = env
+    while isinstance(node, VecEnvWrapper):
+        if isinstance(node, VecCheckNan) and node.raise_exception:
+            return True
+        node = node.venv
+    return isinstance(node, DummyVecEnv) and all(is_wrapped(sub_env, FiniteCheckWrapper) for sub_env in node.envs)
 
 
 def wrap_check_finite(env: VecEnv) -> VecEnv:
-    """Wrap ``env`` in ``VecCheckNan(raise_exception=True, check_inf=True)`` unless such a check is already there.
+    """Make NaN/inf observations, rewards and actions of ``env`` raise a ``ValueError``; returns the env to use.
 
-    The check sits outermost, so it also sees what a ``VecNormalize`` returns (a NaN/inf input makes its statistics, and
-    thus its output, non-finite). Dict action spaces are left alone (``VecCheckNan`` does not support them).
+    In-process envs (a :class:`DummyVecEnv`, possibly under ``VecNormalize`` etc.) get a :class:`FiniteCheckWrapper`
+    around each sub-env, in place: the VecEnv keeps its type (SB3's ``EvalCallback`` warns when the training and eval
+    envs differ in type) and the raw values are checked, before any normalisation. Other VecEnvs (``SubprocVecEnv``...)
+    are wrapped in SB3's ``VecCheckNan(raise_exception=True)``. Nothing is added twice.
     """
-    if isinstance(env.action_space, spaces.Dict) or has_raising_nan_check(env):
+    if has_finite_check(env):
+        return env
+    base = _base_vec_env(env)
+    if isinstance(base, DummyVecEnv):
+        base.envs = [
+            sub_env if is_wrapped(sub_env, FiniteCheckWrapper) else FiniteCheckWrapper(sub_env) for sub_env in base.envs
+        ]
+        return env
+    if isinstance(env.action_space, spaces.Dict):  # not supported by VecCheckNan
         return env
     return VecCheckNan(env, raise_exception=True, warn_once=False, check_inf=True)
 
 
 class FiniteInputsMixin:
-    """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (SB3's ``VecCheckNan``), see module doc.
+    """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (:func:`wrap_check_finite`), see module doc.
 
     Overrides BaseAlgorithm's static ``_wrap_env`` with a classmethod (``self._wrap_env`` and ``cls._wrap_env`` both
     still work), so the check covers the constructor, ``set_env`` and ``load``.
