@@ -41,6 +41,7 @@ SETTINGS = {
 }
 K, CRITIC_STEPS, G, SIGMA, GAMMA, LR, MAX_NORM = 10, 10, 25, 0.05, 0.99, 0.1, 10.0
 EPISODE_STEPS = 500
+MATMUL_SIZE = 1024  # the "large matmul" whose GFLOP/s defines the arithmetic floor
 
 
 class RandomEnv(gym.Env):
@@ -67,16 +68,6 @@ def random_data(n: int, obs_dim: int, action_dim: int, seed: int = 0) -> dict[st
         rewards=rng.normal(size=(n, 1)).astype(f),
         dones=(rng.random((n, 1)) < 0.01).astype(f),
     )
-
-
-def median_time(fn, repeats: int) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
 
 
 # ----- (a) straightforward reference implementation ------------------------------------------------------------------
@@ -167,12 +158,6 @@ def update_flops(cfg: dict) -> float:
     return K * (targets + CRITIC_STEPS * critic_step + G * actor_step)
 
 
-def matmul_gflops(size: int = 1024, repeats: int = 10) -> float:
-    x, y = th.randn(size, size), th.randn(size, size)
-    t = median_time(lambda: x @ y, repeats)
-    return 2 * size**3 / t / 1e9
-
-
 # ----- (c) SB3 DDPG ---------------------------------------------------------------------------------------------------
 def ddpg_episode(cfg: dict):
     """A callable running SB3 DDPG's train() for one episode's worth of data."""
@@ -255,7 +240,6 @@ def main() -> None:
     )
     for name in args.settings:
         cfg = SETTINGS[name]
-        gflops_before = matmul_gflops()
         compiled_fn, compile_first = denfac_update(cfg, "compiled")
         fast_fn, _ = denfac_update(cfg, "fast")
         plain_fn, _ = denfac_update(cfg, "plain")
@@ -264,12 +248,14 @@ def main() -> None:
             actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
             critic=reference_mlp(cfg["obs_dim"] + cfg["action_dim"], 1, cfg["qf"]),
         )
+        big = (th.randn(MATMUL_SIZE, MATMUL_SIZE), th.randn(MATMUL_SIZE, MATMUL_SIZE))
         variants = dict(
             compiled=compiled_fn,
             fast=fast_fn,
             plain=plain_fn,
             reference=lambda d=data, c=cfg, n=nets: reference_update(d, c, n),
             ddpg=ddpg_episode(cfg),
+            matmul=lambda a=big[0], b=big[1]: a @ b,
         )
         # Interleaved: every repeat times each variant back to back, so load changes on the shared machine hit all.
         times: dict[str, list[float]] = {k: [] for k in variants}
@@ -280,8 +266,8 @@ def main() -> None:
                 start = time.perf_counter()
                 fn()
                 times[key].append(time.perf_counter() - start)
-        compiled, fast, plain, reference, ddpg = (float(np.median(times[k])) for k in variants)
-        gflops = max(gflops_before, matmul_gflops())
+        compiled, fast, plain, reference, ddpg, matmul = (float(np.median(times[k])) for k in variants)
+        gflops = 2 * MATMUL_SIZE**3 / matmul / 1e9
         flops = update_flops(cfg)
         floor = flops / (gflops * 1e9)
         results["settings"][name] = dict(
@@ -334,7 +320,7 @@ def main() -> None:
         + ", ".join(f"{n} {r['compiled_first_update_s']:.0f} s" for n, r in results["settings"].items())
         + "); reference: straightforward PyTorch in this file (modules and Adam rebuilt at resets, autograd).",
         "- floor: matmul FLOPs of the update (forward, weight and input gradients; elementwise work not counted) / GFLOP/s "
-        "of a 1024x1024 float32 matmul measured in the same run.",
+        "of a 1024x1024 float32 matmul timed in the same interleaved repeats.",
         f"- DDPG: SB3 DDPG `train()` for one {EPISODE_STEPS}-step episode (one batch-64 gradient step per transition, "
         "same networks without batch norm); x9 = with the paper's 8 additional updates per step.",
         "- Targets (issue 7): reference / fast >= 5x and fast / floor <= 4x.",

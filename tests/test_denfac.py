@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import os
 
 import gymnasium as gym
 import numpy as np
@@ -267,3 +268,20 @@ def test_update_path_errors():
     model = make_model(update_path="fast", policy_kwargs=dict(optimizer_class=th.optim.SGD))
     with pytest.raises(ValueError, match="update_path=.fast. needs"):
         model.learn(60)
+
+
+@pytest.mark.skipif(
+    not os.environ.get("DENFAC_TEST_COMPILED"),
+    reason="torch.compile takes ~1 min of CPU on a cold cache; set DENFAC_TEST_COMPILED=1 to run",
+)
+def test_compiled_path_agrees_with_fast():
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    models = {}
+    for path in ("fast", "compiled"):  # buffer of one episode: the second update runs the compiled full-buffer steps
+        models[path] = make_model(env, buffer_size=50, update_path=path, learning_rate=1e-3).learn(100)
+    fast, compiled = models["fast"], models["compiled"]
+    for key in ("train/critic_loss", "train/actor_objective"):
+        assert fast.logger.name_to_value[key] == pytest.approx(compiled.logger.name_to_value[key], rel=1e-4, abs=1e-5)
+    compiled_state = compiled.policy.state_dict()
+    for name, value in fast.policy.state_dict().items():
+        th.testing.assert_close(compiled_state[name], value, rtol=1e-4, atol=1e-5, msg=name)

@@ -32,8 +32,8 @@ UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
 class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
-    Zimmer, Boniface & Dutech, "Developmental reinforcement learning through sensorimotor space enlargement" / the
-    DENFAC paper (``reference/paper-denfac.md``), section 3, eqs. (4)-(5) and Algorithm 1.
+    Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
+    eqs. (4)-(5) and Algorithm 1; hyper-parameters from section 4 and Figure 5.
 
     Execution: the deterministic actor mu(s) (linear, unbounded output) is played through a truncated Gaussian
     N(mu(s), sigma^2) on the scaled action bounds [-1, 1]; each transition stores its behaviour mean mu_b(s).
