@@ -402,7 +402,8 @@ def test_save_load_file_object(name: str) -> None:
 @pytest.mark.slow
 def test_denfac_compiled_path_save_and_resume(tmp_path: pathlib.Path) -> None:
     """DENFAC's torch.compile update path keeps the contract: the model saves, loads and resumes exactly."""
-    model = make_model("denfac", update_path="compiled", seed=2)
+    # A buffer of two episodes is full from the second update on: the compiled steps run (eager while it fills).
+    model = make_model("denfac", update_path="compiled", buffer_size=2 * EPISODE, seed=2)
     model.learn(2 * EPISODE)
     model.save(tmp_path / "model.zip")
     model.save_replay_buffer(tmp_path / "buffer.pkl")
