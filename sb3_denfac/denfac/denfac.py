@@ -167,7 +167,7 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
             supported_action_spaces=None,  # checked below with a clear message
             support_multi_env=True,  # checked below with a clear message
         )
-        if self.action_space is not None and not isinstance(self.action_space, spaces.Box):
+        if getattr(self, "action_space", None) is not None and not isinstance(self.action_space, spaces.Box):
             raise ValueError(f"DENFAC needs a continuous (Box) action space, got {self.action_space}")
         if self.env is not None and self.n_envs != 1:
             raise ValueError(
