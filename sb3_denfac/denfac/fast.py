@@ -183,15 +183,26 @@ def _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bias_correction2_sqrt, be
     flat.sub_(step_size * exp_avg / denom)
 
 
+def _update_running_(running: list, stats: list, scalars: th.Tensor, n: int) -> None:
+    """BatchNorm1d's running-statistics update; ``scalars[2 + j]`` is BN layer j's averaging factor."""
+    for j in range(len(running)):
+        running_mean, running_var, batches = running[j]
+        mean, var = stats[j]
+        batches.add_(1)
+        running_mean.lerp_(mean, scalars[2 + j])
+        running_var.lerp_(var * (n / (n - 1)), scalars[2 + j])
+
+
 def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_grad_norm: float | None, fuse: bool = False):
-    def critic_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, x, stats0, q, c):
+    def critic_step(flat, exp_avg, exp_avg_sq, scalars, running, x, stats0, q, c):
         out, cache, stats = _train_forward(spec, flat, x, stats0, fuse)
+        _update_running_(running, stats, scalars, x.shape[1])
         diff = out - q
         weighted = c * diff
         loss = (weighted * diff).mean()
         grad, _ = _backward(spec, flat, cache, weighted * (2.0 / x.shape[1]))
-        _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bc2_sqrt, betas[0], betas[1], eps, max_grad_norm)
-        return loss, stats
+        _adam_(flat, grad, exp_avg, exp_avg_sq, scalars[0], scalars[1], betas[0], betas[1], eps, max_grad_norm)
+        return loss
 
     return critic_step
 
@@ -205,8 +216,9 @@ def _make_actor_step(
     inverting: bool,
     fuse: bool = False,
 ):
-    def actor_step(flat, exp_avg, exp_avg_sq, step_size, bc2_sqrt, obs, obs_part, w_act, critic_affines):
+    def actor_step(flat, exp_avg, exp_avg_sq, scalars, running, obs, obs_part, w_act, critic_affines):
         pi, cache, stats = _train_forward(spec, flat, obs, None, fuse)
+        _update_running_(running, stats, scalars, obs.shape[1])
         # Critic in eval mode on (s, pi(s)) (BN folded with running statistics), then d mean(Q) / d pi by hand.
         if fuse:  # obs_part + w_act @ pi as broadcasts: one fused pass with the activation (few actions)
             z = obs_part
@@ -240,8 +252,8 @@ def _make_actor_step(
         if inverting:
             dz = invert_gradients(dz, pi, -th.ones_like(objective), th.ones_like(objective))
         grad, _ = _backward(spec, flat, cache, -dz)
-        _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bc2_sqrt, betas[0], betas[1], eps, max_grad_norm)
-        return objective, stats
+        _adam_(flat, grad, exp_avg, exp_avg_sq, scalars[0], scalars[1], betas[0], betas[1], eps, max_grad_norm)
+        return objective
 
     return actor_step
 
@@ -299,23 +311,20 @@ class _FlatNet:
         """Call after the running statistics were reset outside (num_batches_tracked back to 0)."""
         self.bn_counts = [0] * len(self.bn_layers)
 
-    def adam_scalars(self) -> tuple[th.Tensor, th.Tensor]:
-        """Advance the step count; lr / (1 - beta1^t) and sqrt(1 - beta2^t) as 0-d tensors (no recompilation)."""
+    def step_scalars(self) -> th.Tensor:
+        """Advance the Adam step and BN counts; [lr / (1 - beta1^t), sqrt(1 - beta2^t), BN factors...] as one tensor
+        (values change every step: tensors avoid recompilation)."""
         self.step_count += 1
         t = self.step_count
-        step_size = self.lr / (1 - self.betas[0] ** t)
-        device = self.flat.device
-        return th.tensor(step_size, device=device), th.tensor(math.sqrt(1 - self.betas[1] ** t), device=device)
+        factors = []
+        for j, bn in enumerate(self.bn_layers):
+            self.bn_counts[j] += 1  # host copy of num_batches_tracked: no device sync
+            factors.append(bn.momentum if bn.momentum is not None else 1.0 / self.bn_counts[j])
+        values = [self.lr / (1 - self.betas[0] ** t), math.sqrt(1 - self.betas[1] ** t), *factors]
+        return th.tensor(values, dtype=self.flat.dtype, device=self.flat.device)
 
-    @th.no_grad()
-    def update_running_stats(self, stats: list[tuple[th.Tensor, th.Tensor]], n: int) -> None:
-        """BatchNorm1d's running-statistics update (momentum, or cumulative average when momentum is None)."""
-        for j, (bn, (mean, var)) in enumerate(zip(self.bn_layers, stats, strict=True)):
-            bn.num_batches_tracked.add_(1)  # type: ignore[union-attr, operator]
-            self.bn_counts[j] += 1  # host copy: no device sync
-            factor = bn.momentum if bn.momentum is not None else 1.0 / self.bn_counts[j]
-            bn.running_mean.lerp_(mean, factor)  # type: ignore[union-attr]
-            bn.running_var.lerp_(var * (n / (n - 1)), factor)  # type: ignore[union-attr]
+    def running(self) -> list[tuple[th.Tensor, th.Tensor, th.Tensor]]:
+        return [(bn.running_mean, bn.running_var, bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[misc]
 
     @th.no_grad()
     def eval_affines(self) -> list[tuple[th.Tensor, th.Tensor]]:
@@ -400,14 +409,13 @@ class FastUpdate:
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         full_stats = row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
         loss = th.zeros((), device=obs.device)
+        running = net.running()
         for _ in range(steps):
             idx = batch_indices(inputs.shape[1])
             x, q, c = (inputs, q_t, c_t) if idx is None else (inputs[:, idx], q_t[:, idx], c_t[:, idx])
             step = _step_function("critic", self._size_key(x.shape[1]), net.spec, net.betas, net.eps, max_grad_norm)
-            loss, stats = step(
-                net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), x, full_stats if idx is None else None, q, c
-            )
-            net.update_running_stats(stats, x.shape[1])
+            stats0 = full_stats if idx is None else None
+            loss = step(net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, x, stats0, q, c)
         return loss
 
     @th.no_grad()
@@ -421,13 +429,13 @@ class FastUpdate:
         w_act = w_first[:, -action_dim:].contiguous()
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         objective = th.zeros((), device=obs.device)
+        running = net.running()
         for _ in range(steps):
             idx = batch_indices(obs_t.shape[1])
             o, obs_part = (obs_t, obs_part_full) if idx is None else (obs_t[:, idx], obs_part_full[:, idx])
             key = (net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting)
             step = _step_function("actor", self._size_key(o.shape[1]), *key)
-            objective, stats = step(
-                net.flat, net.exp_avg, net.exp_avg_sq, *net.adam_scalars(), o, obs_part, w_act, critic_affines
+            objective = step(
+                net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, o, obs_part, w_act, critic_affines
             )
-            net.update_running_stats(stats, o.shape[1])
         return objective
