@@ -8,7 +8,7 @@ memory passes dominate, not FLOPs. Each critic step and each actor step is one p
 - activations are feature-major (features, N): the long sample axis is the matmuls' inner/outer dimension and the
   per-feature batch-norm reductions are contiguous;
 - batch norm is folded into the following linear layer (``W diag(gamma rstd)``, shifted bias); its backward uses the
-  reductions the weight-gradient matmul already computes (one extra ``addcmul`` pass per BN layer);
+  reductions the weight-gradient matmul already computes (one extra element-wise pass per BN layer);
 - hand-written backward (no autograd graph); the critic's input layer in eval mode is split into an observation part,
   computed once per fitted iteration, and an action part for the G actor steps;
 - ``update_path="compiled"`` runs the same step functions through ``torch.compile`` with static shapes for the sample
@@ -17,7 +17,7 @@ memory passes dominate, not FLOPs. Each critic step and each actor step is one p
 
 Running statistics, Adam moments and the step count follow PyTorch's ``BatchNorm1d`` and ``Adam`` exactly (up to float
 rounding), so the fast and plain paths give the same result for the same seed (tested). Everything stays on the
-networks' device; nothing synchronises with the host inside the loops.
+networks' device; the loops never wait for the device (per-step scalars go host -> device, nothing comes back).
 """
 
 from __future__ import annotations
