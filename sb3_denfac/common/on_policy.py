@@ -397,7 +397,8 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
             with th.no_grad():
                 means = self.policy.actor_mean(obs_as_tensor(self._last_obs, self.device)).cpu().numpy()  # type: ignore[arg-type]
             actions = self.policy.explore(means)  # scaled to [-1, 1]
-            new_obs, rewards, dones, infos = env.step(self.policy.unscale_action(actions))
+            env_actions = self.policy.unscale_action(actions.reshape((-1, *self.action_space.shape)))  # flat -> Box shape
+            new_obs, rewards, dones, infos = env.step(env_actions)
             self.num_timesteps += env.num_envs
 
             callback.update_locals(locals())
