@@ -14,11 +14,11 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from torch.nn import functional as F
 
 from sb3_denfac.cacla.policies import CACLAPolicy, MlpPolicy
+from sb3_denfac.common.checks import check_positive
 from sb3_denfac.common.networks import has_batch_norm
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
-    check_positive,
     refresh_bn_statistics,
     td_targets,
 )

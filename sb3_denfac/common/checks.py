@@ -230,3 +230,24 @@ class LearnChecksMixin:
 
 class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
     """All checks of this module; put it first in an algorithm's bases."""
+
+
+# ---------------------------------------------------------------------------------------------- hyperparameter checks
+def check_positive(name: str, value: float, integer: bool = False) -> None:
+    """Raise a ValueError naming ``name`` unless ``value`` is a positive number (an integer if ``integer``)."""
+    if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    is_number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if not integer and not (is_number and np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+
+
+def check_learning_rate(name: str, value: Any) -> None:
+    """A learning rate is a positive number, a schedule (callable) or None (= follow ``learning_rate``)."""
+    if value is not None and not callable(value):
+        check_positive(name, value)
+
+
+def check_gamma(gamma: float) -> None:
+    if not 0.0 <= gamma <= 1.0:
+        raise ValueError(f"gamma (discount factor) must lie in [0, 1], got {gamma!r}")

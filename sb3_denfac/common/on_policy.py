@@ -33,7 +33,7 @@ from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
-from sb3_denfac.common.checks import InputChecksMixin
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_positive
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -236,15 +236,6 @@ class TransitionBuffer:
         )
 
 
-def check_positive(name: str, value: float, integer: bool = False) -> None:
-    """Raise a ValueError naming ``name`` unless ``value`` is a positive number (an integer if ``integer``)."""
-    if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    is_number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    if not integer and not (is_number and np.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
-
-
 class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
@@ -284,8 +275,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
         _init_setup_model: bool = True,
     ):
         check_positive("sigma", sigma)
-        if not 0.0 <= gamma <= 1.0:
-            raise ValueError(f"gamma must lie in [0, 1], got {gamma!r}")
+        check_gamma(gamma)
         if max_grad_norm is not None:
             check_positive("max_grad_norm", max_grad_norm)
         rates = dict(

@@ -14,18 +14,11 @@ from stable_baselines3.common.utils import FloatSchedule, polyak_update, update_
 from stable_baselines3.ddpg import DDPG as SB3DDPG
 from torch.nn import functional as F
 
-from sb3_denfac.common.checks import InputChecksMixin
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.networks import set_bn_training_mode
 from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
-
-
-def _check_learning_rate(name: str, value: float | Schedule | None) -> None:
-    if value is None or callable(value):
-        return
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive number or a schedule, got {value!r}")
 
 
 class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
@@ -143,12 +136,11 @@ class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
         self.inverting_gradients = bool(inverting_gradients)
         if self.sigma is not None and action_noise is not None:
             raise ValueError("action_noise is only used with sigma=None (sigma > 0 selects truncated Gaussian exploration)")
-        _check_learning_rate("learning_rate", learning_rate)
-        _check_learning_rate("actor_learning_rate", actor_learning_rate)
+        check_learning_rate("learning_rate", learning_rate)
+        check_learning_rate("actor_learning_rate", actor_learning_rate)
         if not 0.0 < tau <= 1.0:
             raise ValueError(f"tau must be in (0, 1], got {tau}")
-        if not 0.0 <= gamma <= 1.0:
-            raise ValueError(f"gamma must be in [0, 1], got {gamma}")
+        check_gamma(gamma)
         if batch_size < 1 or (batch_size < 2 and self.policy_kwargs.get("batch_norm", True)):
             raise ValueError(f"batch_size must be >= 2 with batch norm (>= 1 without), got {batch_size}")
         if gradient_steps == 0 or gradient_steps < -1:

@@ -16,6 +16,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import update_learning_rate
 from torch.nn.utils import clip_grad_norm_
 
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
@@ -29,7 +30,7 @@ WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
 UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
 
 
-class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
+class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
     Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
@@ -58,6 +59,8 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
       ``bn_momentum=None`` the running statistics are reset at every fit and are the cumulative average over its
       full-batch steps, so eval mode uses the statistics of the buffer.
     - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
+    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
+      ValueError, and ``load`` refuses corrupted zips and zips or replay buffers of another algorithm.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -140,6 +143,13 @@ class DENFAC(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
         _init_setup_model: bool = True,
     ):
         self._check_arguments(n_fitted_iterations, actor_steps, critic_steps, weighting, batch_size, buffer_size)
+        check_gamma(gamma)
+        for name, rate in (
+            ("learning_rate", learning_rate),
+            ("actor_learning_rate", actor_learning_rate),
+            ("critic_learning_rate", critic_learning_rate),
+        ):
+            check_learning_rate(name, rate)
         if update_path not in UPDATE_PATHS:
             raise ValueError(f"update_path must be one of {UPDATE_PATHS}, got {update_path!r}")
         super().__init__(
