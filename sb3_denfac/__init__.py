@@ -10,9 +10,10 @@ register_envs()
 
 from sb3_denfac.cacla import CACLA  # noqa: E402
 from sb3_denfac.cmaes import CMAES  # noqa: E402
+from sb3_denfac.common.callbacks import EpisodePerformanceCallback  # noqa: E402
 from sb3_denfac.ddpg import DDPG  # noqa: E402
 from sb3_denfac.denfac import DENFAC  # noqa: E402
 from sb3_denfac.nfac import NFAC  # noqa: E402
 
 __version__ = "0.1.0"
-__all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "register_envs"]
+__all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "EpisodePerformanceCallback", "register_envs"]
