@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
-import importlib
 import io
 import json
 import os
@@ -42,27 +41,14 @@ for _p in (str(_HERE), str(_REPO)):  # run from a checkout without installing th
 
 import figure3_analysis as fa  # noqa: E402
 
-ALGOS: dict[str, str] = {
-    "denfac": "sb3_denfac.denfac:DENFAC",
-    "ddpg": "sb3_denfac.ddpg:DDPG",
-    "nfac": "sb3_denfac.nfac:NFAC",
-    "cacla": "sb3_denfac.cacla:CACLA",
-    "cmaes": "sb3_denfac.cmaes:CMAES",
-    "td3": "stable_baselines3:TD3",
-    "sac": "stable_baselines3:SAC",
-    "crossq": "sb3_contrib:CrossQ",
-}
+# Zoo names of the compared algorithms; models are built by sb3_denfac.zoo.make_model (the RL Zoo's preprocessing).
+ALGOS: list[str] = ["denfac", "ddpg", "nfac", "cacla", "cmaes", "td3", "sac", "crossq"]
 DEFAULT_ENVS = ["acrobot", "cartpole", "halfcheetah"]
 # Used only when hyperparams/<algo>.yml has no entry for the env (recorded as "benchmark fallback" in the results):
 # the env's paper gamma, plus exploration noise for TD3, whose SB3 default explores with no noise at all.
 FALLBACK_HYPERPARAMS: dict[str, dict[str, Any]] = {"td3": {"noise_type": "normal", "noise_std": 0.1}}
 DEFAULT_HYPERPARAMS_DIR = _REPO / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
 DEFAULT_RESULTS_DIR = _HERE / "results" / "figure3"
-
-
-def _load_class(path: str) -> type:
-    module, name = path.split(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def load_hyperparams(algo: str, env: str, hyperparams_dir: str | Path) -> tuple[dict[str, Any], str]:
@@ -88,22 +74,10 @@ def load_hyperparams(algo: str, env: str, hyperparams_dir: str | Path) -> tuple[
 
 
 def make_model(algo: str, gym_id: str, hyperparams: dict[str, Any], seed: int, device: str = "cpu") -> Any:
-    """Build the env and the model exactly as the RL Zoo would from these hyperparameters.
+    """Build the env and the model exactly as the RL Zoo would from these hyperparameters (no monitor file)."""
+    from sb3_denfac.zoo import make_model as zoo_make_model
 
-    Reuses ``rl_zoo3.exp_manager.ExperimentManager``'s preprocessing (schedules, ``normalize``, ``policy_kwargs``,
-    ``env_wrapper``, ``noise_type``/``noise_std``, ``train_freq`` lists), without its log folders or callbacks.
-    """
-    from rl_zoo3.exp_manager import ExperimentManager
-
-    hyperparams = dict(hyperparams)
-    hyperparams.setdefault("n_timesteps", 0)  # the zoo requires it; the budget here is in episodes
-    hyperparams.setdefault("policy", "MlpPolicy")
-    manager = ExperimentManager(argparse.Namespace(), algo, gym_id, log_folder=os.devnull, seed=seed, verbose=0)
-    kwargs, manager.env_wrapper, _, manager.vec_env_wrapper = manager._preprocess_hyperparams(hyperparams)
-    env = manager.create_envs(manager.n_envs, no_log=True)
-    kwargs = manager._preprocess_action_noise(kwargs, {}, env)
-    algo_cls = _load_class(ALGOS[algo])
-    return algo_cls(env=env, seed=seed, verbose=0, device=device, **kwargs)
+    return zoo_make_model(algo, gym_id, hyperparams, seed=seed, device=device)
 
 
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
