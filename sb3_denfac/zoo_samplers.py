@@ -105,7 +105,8 @@ def sample_ddpg_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
 # --------------------------------------------------------------------------------------------------------------------
 
 
-def convert_nfac_params(params: dict[str, Any]) -> dict[str, Any]:
+def convert_value_critic_params(params: dict[str, Any]) -> dict[str, Any]:
+    """NFAC and CACLA: a V critic, so the critic's architecture goes to ``net_arch["vf"]``."""
     hyperparams = _copy_except(params, "actor_arch", "critic_arch")
     hyperparams["policy_kwargs"] = _policy_kwargs(params, critic_key="vf")
     return hyperparams
@@ -125,18 +126,12 @@ def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_nfac_params(params)
+    return convert_value_critic_params(params)
 
 
 # --------------------------------------------------------------------------------------------------------------------
 # CACLA (online, on-policy, V critic)
 # --------------------------------------------------------------------------------------------------------------------
-
-
-def convert_cacla_params(params: dict[str, Any]) -> dict[str, Any]:
-    hyperparams = _copy_except(params, "actor_arch", "critic_arch")
-    hyperparams["policy_kwargs"] = _policy_kwargs(params, critic_key="vf")
-    return hyperparams
 
 
 def sample_cacla_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
@@ -149,7 +144,7 @@ def sample_cacla_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_cacla_params(params)
+    return convert_value_critic_params(params)
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -189,7 +184,7 @@ SAMPLERS = {
 CONVERTERS = {
     "denfac": convert_denfac_params,
     "ddpg": convert_ddpg_params,
-    "nfac": convert_nfac_params,
-    "cacla": convert_cacla_params,
+    "nfac": convert_value_critic_params,
+    "cacla": convert_value_critic_params,
     "cmaes": convert_cmaes_params,
 }
