@@ -159,6 +159,16 @@ def update_flops(cfg: dict) -> float:
 
 
 # ----- (c) SB3 DDPG ---------------------------------------------------------------------------------------------------
+def fill_replay_buffer(rb, cfg: dict) -> None:
+    """Fill a single-env SB3 replay buffer with ``cfg["buffer_size"]`` random transitions (DENFAC's also gets means)."""
+    data = random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"])
+    rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
+    rb.rewards[:, 0], rb.dones[:, 0] = data["rewards"][:, 0], data["dones"][:, 0]
+    if hasattr(rb, "behaviour_means"):
+        rb.behaviour_means[:, 0] = data["means"]
+    rb.full = True
+
+
 def ddpg_episode(cfg: dict):
     """A callable running SB3 DDPG's train() for one episode's worth of data."""
     from stable_baselines3 import DDPG
@@ -175,10 +185,7 @@ def ddpg_episode(cfg: dict):
         seed=0,
     )
     model.set_logger(configure(None, []))
-    data = random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"])
-    rb = model.replay_buffer
-    rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
-    rb.rewards[:, 0], rb.dones[:, 0], rb.full = data["rewards"][:, 0], data["dones"][:, 0], True
+    fill_replay_buffer(model.replay_buffer, cfg)
     return lambda: model.train(gradient_steps=EPISODE_STEPS, batch_size=64)
 
 
@@ -207,11 +214,7 @@ def denfac_update(cfg: dict, path: str):
         seed=0,
     )
     model.set_logger(configure(None, []))
-    data = random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"])
-    rb = model.replay_buffer
-    rb.observations[:, 0], rb.next_observations[:, 0], rb.actions[:, 0] = data["obs"], data["next_obs"], data["actions"]
-    rb.behaviour_means[:, 0], rb.rewards[:, 0], rb.dones[:, 0] = data["means"], data["rewards"][:, 0], data["dones"][:, 0]
-    rb.full = True
+    fill_replay_buffer(model.replay_buffer, cfg)
     start = time.perf_counter()
     model._update()
     return model._update, time.perf_counter() - start
