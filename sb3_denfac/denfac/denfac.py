@@ -357,7 +357,7 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         compiled_size = None
         if self.update_path == "compiled":  # the sample count that repeats: full buffer or mini-batch
             compiled_size = self.replay_buffer.buffer_size if self.batch_size is None else self.batch_size
-        return FastUpdate(self.policy, *layers, compiled_size=compiled_size)
+        return FastUpdate(self.policy, *layers, batch_size=self.batch_size, compiled_size=compiled_size)
 
     def _update(self) -> None:
         """One end-of-episode update: Algorithm 1 with K fitted iterations over the whole buffer D."""
@@ -369,17 +369,19 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         low, high = th.full_like(actions, -1.0), th.full_like(actions, 1.0)
         self.policy.set_training_mode(False)
         fast = self._fast_update()
+        # pi(s) and Q(s, a) in eval mode: the modules, or the same networks through the fast path's flat parameters
+        actor, critic = (self.actor, self.critic) if fast is None else (fast.actor_eval, fast.critic_eval)
         critic_loss = actor_objective = th.zeros(())
         for _ in range(self.n_fitted_iterations):
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_actions = self.actor(next_obs).clamp(-1.0, 1.0)
-                q_targets = rewards + self.gamma * (1.0 - terminal) * self.critic(next_obs, next_actions)
+                next_actions = actor(next_obs).clamp(-1.0, 1.0)
+                q_targets = rewards + self.gamma * (1.0 - terminal) * critic(next_obs, next_actions)
                 if self.weighting == "none":
                     weights = th.ones_like(rewards)
                 else:
                     weight_obs = next_obs if self.weighting == "retrace_next_state_quirk" else obs
-                    log_prob_target = self._target_log_prob(actions, self.actor(weight_obs), low, high)
+                    log_prob_target = self._target_log_prob(actions, actor(weight_obs), low, high)
                     weights = truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
             if self.reset_critic:
                 self.policy.reset_critic()

@@ -29,6 +29,7 @@ import torch as th
 from torch import nn
 
 from sb3_denfac.common.inverting_gradients import invert_gradients
+from sb3_denfac.denfac import eager_steps
 
 
 def row_var_mean(x: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
@@ -294,7 +295,12 @@ class _FlatNet:
         self.optimizer = optimizer
         group = optimizer.param_groups[0]
         self.lr, self.betas, self.eps = float(group["lr"]), tuple(group["betas"]), float(group["eps"])
+        self.views = self.spec.unpack(self.flat)
+        self.weights_t = [weight.t() for _, _, weight, _ in self.views]
+        self.grad = th.zeros_like(self.flat)
+        self.grad_views = self.spec.unpack(self.grad)
         self.exp_avg, self.exp_avg_sq = th.zeros_like(self.flat), th.zeros_like(self.flat)
+        self.step_tensor = th.zeros((), dtype=self.flat.dtype, device=self.flat.device)  # fused Adam's step
         self.step_count = 0
         states = [optimizer.state.get(p) for p in self.params]
         if all(states):
@@ -311,17 +317,30 @@ class _FlatNet:
         """Call after the running statistics were reset outside (num_batches_tracked back to 0)."""
         self.bn_counts = [0] * len(self.bn_layers)
 
-    def step_scalars(self) -> th.Tensor:
-        """Advance the Adam step and BN counts; [lr / (1 - beta1^t), sqrt(1 - beta2^t), BN factors...] as one tensor
-        (values change every step: tensors avoid recompilation)."""
+    def advance(self) -> list[float]:
+        """Advance the Adam step and the BN counts (host copies: no device sync); the BN averaging factors."""
         self.step_count += 1
-        t = self.step_count
         factors = []
         for j, bn in enumerate(self.bn_layers):
-            self.bn_counts[j] += 1  # host copy of num_batches_tracked: no device sync
+            self.bn_counts[j] += 1
             factors.append(bn.momentum if bn.momentum is not None else 1.0 / self.bn_counts[j])
+        return factors
+
+    def step_scalars(self) -> th.Tensor:
+        """:meth:`advance`, as one tensor [lr / (1 - beta1^t), sqrt(1 - beta2^t), BN factors...] for the compiled
+        steps (values change every step: tensors avoid recompilation)."""
+        factors = self.advance()
+        t = self.step_count
         values = [self.lr / (1 - self.betas[0] ** t), math.sqrt(1 - self.betas[1] ** t), *factors]
         return th.tensor(values, dtype=self.flat.dtype, device=self.flat.device)
+
+    def finish_fit(self, fixed) -> None:
+        """After an eager fit: the first BN layer's deferred running update, and the host BN counts written into
+        ``num_batches_tracked`` (the eager steps count on the host only)."""
+        if fixed is not None:
+            fixed.apply(self.bn_layers[0])
+        for bn, count in zip(self.bn_layers, self.bn_counts, strict=True):
+            bn.num_batches_tracked.fill_(count)  # type: ignore[union-attr]
 
     def running(self) -> list[tuple[th.Tensor, th.Tensor, th.Tensor]]:
         return [(bn.running_mean, bn.running_var, bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[misc]
@@ -337,6 +356,15 @@ class _FlatNet:
                 scale = gamma * th.rsqrt(layer.bn.running_var + layer.bn.eps)  # type: ignore[operator]
                 out.append((weight * scale, bias + weight @ (beta - layer.bn.running_mean * scale)))  # type: ignore[operator]
         return out
+
+    def eval_forward(self, x: th.Tensor) -> th.Tensor:
+        """Eval-mode forward on feature-major x (features, N), batch norm folded into the linear layers."""
+        h = x
+        for (weight, bias), slope in zip(self.eval_affines(), self.spec.slopes, strict=True):
+            h = th.addmm(bias.unsqueeze(1), weight, h)
+            if slope is not None:
+                th.nn.functional.leaky_relu_(h, slope)
+        return h
 
     def write_back(self) -> None:
         """Store the Adam moments in the torch optimizer's state (a later plain update or a save sees them)."""
@@ -379,11 +407,24 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
 class FastUpdate:
     """Critic fit and actor fit of one DENFAC update with the step functions above (eager or compiled)."""
 
-    def __init__(self, policy, actor_layers: list[_Layer], critic_layers: list[_Layer], compiled_size: int | None = None):
-        """``compiled_size``: sample count N whose steps run compiled (None: all eager)."""
+    def __init__(
+        self,
+        policy,
+        actor_layers: list[_Layer],
+        critic_layers: list[_Layer],
+        batch_size: int | None = None,
+        compiled_size: int | None = None,
+    ):
+        """``batch_size``: mini-batch size (None: full batch); ``compiled_size``: sample count N whose steps run
+        compiled (None: all eager)."""
+        self.batch_size = batch_size
         self.actor = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
         self.critic = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
         self.compiled_size = compiled_size
+
+    def _sample_count(self, n_full: int) -> int:
+        """Samples per step: the whole buffer, or the mini-batch (as ``DENFAC._batch_indices`` draws it)."""
+        return n_full if self.batch_size is None or self.batch_size >= n_full else self.batch_size
 
     def _size_key(self, n: int) -> int | None:
         return n if n == self.compiled_size else None
@@ -391,6 +432,16 @@ class FastUpdate:
     def write_back(self) -> None:
         self.actor.write_back()
         self.critic.write_back()
+
+    @th.no_grad()
+    def actor_eval(self, obs: th.Tensor) -> th.Tensor:
+        """pi(s) in eval mode (running statistics), (N, A) like ``policy.actor(obs)``, from the flat parameters."""
+        return self.actor.eval_forward(obs.float().t()).t()
+
+    @th.no_grad()
+    def critic_eval(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """Q(s, a) in eval mode, (N, 1) like ``policy.critic(obs, actions)``."""
+        return self.critic.eval_forward(th.cat([obs.float(), actions], dim=1).t()).t()
 
     @th.no_grad()
     def fit_critic(
@@ -407,8 +458,29 @@ class FastUpdate:
         net = self.critic
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
+        n_full = inputs.shape[1]
+        n = self._sample_count(n_full)
+        if self._size_key(n) is not None:
+            return self._fit_critic_compiled(inputs, q_t, c_t, steps, max_grad_norm, batch_indices)
+        # Eager: the first layer's BN statistics of the fixed data are computed once per fit (full batch).
+        ws = eager_steps.Workspace(net.spec.sizes, n, inputs)
+        fixed = eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+        scaled_full = c_t * (2.0 / n_full)
+        loss = None
+        for step in range(steps):
+            idx = batch_indices(n_full)
+            if idx is None:
+                x, q, c2 = inputs, q_t, scaled_full
+            else:
+                x, q, c2 = inputs[:, idx], q_t[:, idx], c_t[:, idx] * (2.0 / n)
+            loss = eager_steps.critic_step(net, ws, x, fixed, q, c2, max_grad_norm, want_loss=step == steps - 1)
+        net.finish_fit(fixed)
+        return loss  # type: ignore[return-value]
+
+    def _fit_critic_compiled(self, inputs, q_t, c_t, steps, max_grad_norm, batch_indices) -> th.Tensor:
+        net = self.critic
         full_stats = row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
-        loss = th.zeros((), device=obs.device)
+        loss = th.zeros((), device=inputs.device)
         running = net.running()
         for _ in range(steps):
             idx = batch_indices(inputs.shape[1])
@@ -428,7 +500,30 @@ class FastUpdate:
         w_first, b_first = critic_affines[0]
         w_act = w_first[:, -action_dim:].contiguous()
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
-        objective = th.zeros((), device=obs.device)
+        n_full = obs_t.shape[1]
+        n = self._sample_count(n_full)
+        if self._size_key(n) is not None:
+            return self._fit_actor_compiled(
+                obs_t, critic_affines, w_act, obs_part_full, steps, max_grad_norm, inverting, batch_indices
+            )
+        ws = eager_steps.Workspace(net.spec.sizes, n, obs_t)
+        fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+        critic_full = eager_steps.EvalCritic(
+            critic_affines, self.critic.spec.slopes, obs_part_full, action_dim, self.critic.spec.sizes, n
+        )
+        objective = None
+        for step in range(steps):
+            idx = batch_indices(n_full)
+            o, critic = (obs_t, critic_full) if idx is None else (obs_t[:, idx], critic_full.subset(idx))
+            objective = eager_steps.actor_step(
+                net, ws, o, fixed, critic, max_grad_norm, inverting, want_objective=step == steps - 1
+            )
+        net.finish_fit(fixed)
+        return objective  # type: ignore[return-value]
+
+    def _fit_actor_compiled(self, obs_t, critic_affines, w_act, obs_part_full, steps, max_grad_norm, inverting, batch_indices):
+        net = self.actor
+        objective = th.zeros((), device=obs_t.device)
         running = net.running()
         for _ in range(steps):
             idx = batch_indices(obs_t.shape[1])

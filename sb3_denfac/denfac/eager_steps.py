@@ -1,0 +1,272 @@
+"""Eager critic and actor steps of DENFAC's fast update (``update_path="fast"``, the default): few ops, no allocations.
+
+At the paper's sizes (D = 6000 samples, critic 50-7) one step is ~100 small tensor ops around a handful of
+(50, N) matmuls, so two costs dominate: per-op dispatch (~2 us each, 350 steps per update) and passes over the
+(features, N) activations. These functions therefore
+
+- write every (features, N) intermediate into buffers preallocated once per fit (:class:`Workspace`), with ``out=``
+  and in-place ops: no per-step allocation (a fresh 1.2 MB tensor per op made glibc map and fault in pages, which
+  slowed updates 2-3x at random) and fewer passes over memory;
+- write gradients straight into views of one flat gradient tensor, and step Adam with PyTorch's fused Adam kernel
+  (``torch._fused_adam_``, the kernel behind ``Adam(fused=True)``): one op instead of a dozen;
+- skip what the algorithm never reads: the loss of every critic step but the last, the objective of every actor step
+  but the last, the input gradient of the first layer;
+- fold batch norm into the following linear layer (``W diag(gamma rstd)``, shifted bias) as the compiled steps do
+  (see ``fast.py``), so normalised activations are never written.
+
+The arithmetic is the plain path's (autograd on the modules, ``clip_grad_norm_``, ``torch.optim.Adam``) up to float
+rounding; ``tests/test_denfac.py::test_fast_and_plain_paths_agree`` checks it.
+"""
+
+from __future__ import annotations
+
+import torch as th
+from torch.nn import functional as F  # noqa: N812
+
+from sb3_denfac.common.inverting_gradients import invert_gradients
+
+
+def _activate_(h: th.Tensor, slope: float | None) -> th.Tensor:
+    """In place leaky ReLU (None: linear)."""
+    return h if slope is None else F.leaky_relu_(h, slope)
+
+
+def _activation_backward_(grad: th.Tensor, out: th.Tensor, slope: float | None) -> th.Tensor:
+    """In place: ``grad`` <- d leaky_relu / d input * ``grad``, from the activation's output ``out``."""
+    if slope is None:
+        return grad
+    return th.ops.aten.leaky_relu_backward.grad_input(grad, out, slope, True, grad_input=grad)
+
+
+class Workspace:
+    """Preallocated feature-major (features, N) buffers of one network for one sample count N."""
+
+    def __init__(self, sizes: tuple[int, ...], n: int, like: th.Tensor):
+        def empty(rows: int) -> th.Tensor:
+            return th.empty((rows, n), dtype=like.dtype, device=like.device)
+
+        self.n = n
+        self.outputs = [empty(d) for d in sizes[1:]]  # post-activation output of every layer
+        self.outputs_t = [out.t() for out in self.outputs]  # views, made once
+        self.input_grads = [empty(d) for d in sizes[:-1]]  # d loss / d (input of layer i), i >= 1 used
+        self.centred = empty(max(sizes[:-1]))  # scratch for the batch-norm variance
+
+
+def batch_stats(h: th.Tensor, scratch: th.Tensor, eps: float) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+    """Batch mean, biased variance and 1/sqrt(var + eps) of each row of a (C, N) tensor (two-pass: no cancellation)."""
+    mean = h.mean(1)
+    centred = th.sub(h, mean.unsqueeze(1), out=scratch[: h.shape[0]])
+    var = th.linalg.vector_norm(centred, dim=1).square_().div_(h.shape[1])
+    return mean, var, (var + eps).rsqrt_()
+
+
+def forward_train(net, ws: Workspace, x: th.Tensor, first_stats) -> list:
+    """Train-mode forward of a flat ``create_bn_mlp`` network on feature-major x; outputs land in ``ws.outputs``.
+
+    ``first_stats``: precomputed (mean, var, rstd) of x for the first batch norm (fixed data over a fit) or None.
+    Returns per layer (mean, var, rstd, effective weight) for the backward pass and the running statistics.
+    """
+    spec, h, folds = net.spec, x, []
+    for i, (gamma, beta, weight, bias) in enumerate(net.views):
+        if gamma is None:
+            folds.append((None, None, None, weight))
+            w_eff, b_eff = weight, bias
+        else:
+            if i == 0 and first_stats is not None:
+                mean, var, rstd = first_stats
+            else:
+                mean, var, rstd = batch_stats(h, ws.centred, spec.eps[i])
+            # BN(h) = gamma (h - mean) rstd + beta folded into the linear layer: W' = W diag(s), b' = b + W (beta - mean s)
+            scale = gamma * rstd
+            w_eff = weight * scale
+            b_eff = th.addmv(bias, weight, th.addcmul(beta, mean, scale, value=-1.0))
+            folds.append((mean, var, rstd, w_eff))
+        h = _activate_(th.addmm(b_eff.unsqueeze(1), w_eff, h, out=ws.outputs[i]), spec.slopes[i])
+    return folds
+
+
+def update_running_stats(net, folds: list, n: int, factors: list[float], skip_first: bool) -> None:
+    """BatchNorm1d's running-statistics update (unbiased variance); ``factors``: averaging factor per BN layer.
+
+    ``skip_first``: the first BN layer sees the same data at every step of the fit; its running statistics are then
+    updated once at the end (:class:`FixedStats`).
+    """
+    j = 0
+    for layer_bn, (mean, var, _, _) in zip(net.spec.bn, folds, strict=True):
+        if not layer_bn:
+            continue
+        if not (j == 0 and skip_first):
+            bn = net.bn_layers[j]
+            bn.running_mean.lerp_(mean, factors[j])
+            bn.running_var.lerp_(var * (n / (n - 1)), factors[j])
+        j += 1
+
+
+class FixedStats:
+    """Batch statistics of the first BN layer's input when it is the same data at every step (full-batch fits).
+
+    Its running statistics follow r <- r + f_t (x - r) at every step; with x fixed that is one update with weight
+    1 - prod_t (1 - f_t), applied by :meth:`apply` after the fit (exactly x when the statistics were reset, f_1 = 1).
+    """
+
+    def __init__(self, x: th.Tensor, scratch: th.Tensor, eps: float):
+        self.mean, self.var, self.rstd = batch_stats(x, scratch, eps)
+        self.n = x.shape[1]
+        self.keep = 1.0
+
+    def as_first(self) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        return self.mean, self.var, self.rstd
+
+    def step(self, factor: float) -> None:
+        self.keep *= 1.0 - factor
+
+    def apply(self, bn) -> None:
+        bn.running_mean.lerp_(self.mean, 1.0 - self.keep)
+        bn.running_var.lerp_(self.var * (self.n / (self.n - 1)), 1.0 - self.keep)
+
+
+def backward(net, ws: Workspace, x: th.Tensor, folds: list, grad_out: th.Tensor) -> None:
+    """Write d loss / d parameters of a :func:`forward_train` pass into ``net.grad`` (flat), given d loss / d output.
+
+    Batch-norm layers use the folded form: with xhat = (h - mean) rstd and m = sum_n dz h^T,
+    dW = gamma (m - sum(dz) mean^T) rstd + sum(dz) beta^T, and d loss / d h is an affine map of h per feature.
+    """
+    spec, n, dz = net.spec, x.shape[1], grad_out
+    for i in range(len(net.views) - 1, -1, -1):
+        gamma, beta, weight, _ = net.views[i]
+        g_gamma, g_beta, g_weight, g_bias = net.grad_views[i]
+        mean, _, rstd, w_eff = folds[i]
+        h = x if i == 0 else ws.outputs[i - 1]
+        h_t = x.t() if i == 0 else ws.outputs_t[i - 1]
+        th.sum(dz, 1, out=g_bias)
+        if gamma is None:
+            th.mm(dz, h_t, out=g_weight)
+            dx = th.mm(net.weights_t[i], dz, out=ws.input_grads[i]) if i > 0 else None
+        else:
+            t = th.mm(dz, h_t).addr_(g_bias, mean, alpha=-1.0).mul_(rstd)  # sum_n dz xhat^T
+            th.mul(t, gamma, out=g_weight).addr_(g_bias, beta)
+            th.mv(net.weights_t[i], g_bias, out=g_beta)  # sum_n dL/dBN(h)
+            th.sum(weight * t, 0, out=g_gamma)  # sum_n dL/dBN(h) xhat
+            dx = None
+            if i > 0:  # dL/dh = rstd gamma (g - mean_n g - xhat mean_n(g xhat)), g = W^T dz: affine in h per feature
+                k = rstd * gamma / n
+                r = k * rstd * g_gamma
+                shift = th.addcmul(r * mean, k, g_beta, value=-1.0)
+                dx = th.addmm(shift.unsqueeze(1), w_eff.t(), dz, out=ws.input_grads[i])
+                dx.addcmul_(h, r.unsqueeze(1), value=-1.0)
+        if dx is not None:
+            _activation_backward_(dx, h, spec.slopes[i - 1])
+        dz = dx  # type: ignore[assignment]
+
+
+def adam_step(net, max_grad_norm: float | None) -> None:
+    """clip_grad_norm_ then one torch Adam step on the flat parameters, with PyTorch's fused Adam kernel."""
+    grad = net.grad
+    scale = None
+    if max_grad_norm is not None:  # fused Adam divides the gradient by grad_scale: 1 / clip_grad_norm_'s factor
+        scale = ((th.linalg.vector_norm(grad) + 1e-6) / max_grad_norm).clamp_(min=1.0)
+    net.step_tensor.fill_(net.step_count)
+    th._fused_adam_(
+        [net.flat],
+        [grad],
+        [net.exp_avg],
+        [net.exp_avg_sq],
+        [],
+        [net.step_tensor],
+        lr=net.lr,
+        beta1=net.betas[0],
+        beta2=net.betas[1],
+        weight_decay=0.0,
+        eps=net.eps,
+        amsgrad=False,
+        maximize=False,
+        grad_scale=scale,
+    )
+
+
+def critic_step(net, ws: Workspace, x, fixed: FixedStats | None, q_targets, scaled_weights, max_grad_norm, want_loss: bool):
+    """One Adam step on 1/N sum_n c_n (Q(s_n, a_n) - q_n)^2 (Algorithm 1, critic fit); ``scaled_weights`` = 2 c / N.
+
+    Returns the loss before the step if ``want_loss`` (only the last step's is logged), else None.
+    """
+    factors = net.advance()
+    folds = forward_train(net, ws, x, None if fixed is None else fixed.as_first())
+    update_running_stats(net, folds, x.shape[1], factors, skip_first=fixed is not None)
+    if fixed is not None:
+        fixed.step(factors[0])
+    diff = ws.outputs[-1].sub_(q_targets)  # the output buffer is not read again
+    loss = th.dot(diff[0], diff[0] * scaled_weights[0]) * 0.5 if want_loss else None
+    backward(net, ws, x, folds, diff.mul_(scaled_weights))
+    adam_step(net, max_grad_norm)
+    return loss
+
+
+class EvalCritic:
+    """The critic in eval mode for an actor fit: BN folded into affines, first layer split into a fixed observation
+    part W_s s + b (computed once per fit, all samples) and the action weights W_a, and buffers for n samples
+    per step (the whole buffer, or a mini-batch: :meth:`subset`)."""
+
+    def __init__(self, affines: list, slopes: tuple, obs_part: th.Tensor, action_dim: int, sizes: tuple[int, ...], n: int):
+        self.affines, self.slopes, self.obs_part = affines, slopes, obs_part
+        self.w_act = affines[0][0][:, -action_dim:].contiguous()
+        self.w_act_t = self.w_act.t()
+        self.ws = Workspace(sizes, n, obs_part)
+        w_last, b_last = affines[-1]
+        # d mean_n Q / d (last hidden output) = w_last / N for every sample: a broadcast view, made once
+        self.dq_dh_last = (w_last[0] / n).unsqueeze(1).expand(w_last.shape[1], n)
+        self.w_last, self.b_last = w_last, b_last
+
+    def subset(self, idx: th.Tensor) -> EvalCritic:
+        """The same critic on the mini-batch ``idx``."""
+        sub = object.__new__(EvalCritic)
+        sub.__dict__.update(self.__dict__)
+        sub.obs_part = self.obs_part[:, idx]
+        return sub
+
+    def action_gradient(self, pi: th.Tensor, want_value: bool) -> tuple[th.Tensor, th.Tensor | None]:
+        """d (1/N sum_n Q(s_n, pi_n)) / d pi (A, N), and the mean Q if ``want_value``."""
+        affines, slopes, ws, n_layers = self.affines, self.slopes, self.ws, len(self.affines)
+        if n_layers == 1:  # linear critic
+            value = self.obs_part.mean() + th.dot(self.w_act[0], pi.mean(1)) if want_value else None
+            return (self.w_act_t / pi.shape[1]).expand_as(pi).contiguous(), value
+        h = ws.outputs[0]
+        if pi.shape[0] == 1:  # a rank-1 update: one pass instead of addmm's two
+            th.addcmul(self.obs_part, self.w_act, pi, out=h)
+        else:
+            th.addmm(self.obs_part, self.w_act, pi, out=h)
+        _activate_(h, slopes[0])
+        for i in range(1, n_layers - 1):
+            weight, bias = affines[i]
+            h = _activate_(th.addmm(bias.unsqueeze(1), weight, h, out=ws.outputs[i]), slopes[i])
+        value = th.addmv(self.b_last, self.w_last, h.mean(1))[0] if want_value else None
+        last = n_layers - 2
+        dz = ws.input_grads[last + 1]
+        if slopes[last] is None:
+            dz.copy_(self.dq_dh_last)
+        else:
+            th.ops.aten.leaky_relu_backward.grad_input(self.dq_dh_last, h, slopes[last], True, grad_input=dz)
+        for i in range(last, 0, -1):
+            dh = th.mm(affines[i][0].t(), dz, out=ws.input_grads[i])
+            dz = _activation_backward_(dh, ws.outputs[i - 1], slopes[i - 1])
+        return th.mm(self.w_act_t, dz), value
+
+
+def actor_step(
+    net, ws: Workspace, obs, fixed: FixedStats | None, critic: EvalCritic, max_grad_norm, inverting: bool, want_objective: bool
+):
+    """One Adam step ascending 1/N sum_n Q(s_n, pi(s_n)) (Algorithm 1, actor fit; inverting gradients optional).
+
+    Returns the objective before the step if ``want_objective``, else None.
+    """
+    factors = net.advance()
+    folds = forward_train(net, ws, obs, None if fixed is None else fixed.as_first())
+    update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
+    if fixed is not None:
+        fixed.step(factors[0])
+    pi = ws.outputs[-1]
+    ascent, objective = critic.action_gradient(pi, want_objective)
+    if inverting:
+        ascent = invert_gradients(ascent, pi, -1.0, 1.0)  # type: ignore[arg-type]
+    backward(net, ws, obs, folds, ascent.neg_())
+    adam_step(net, max_grad_norm)
+    return objective
