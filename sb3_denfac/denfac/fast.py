@@ -1,23 +1,24 @@
-"""Fast paths of DENFAC's end-of-episode update (issue 7): the same arithmetic as the plain autograd path, fewer ops.
+"""Fast paths of DENFAC's end-of-episode update (issue 7): the plain autograd path's arithmetic, fewer ops.
 
 The update fits tiny networks (e.g. 5-50-7-1) on a few thousand samples hundreds of times, so per-op dispatch and
-memory passes dominate, not FLOPs. Each critic step and each actor step is one pure function of tensors:
+memory passes over the activations dominate, not FLOPs. Common to both fast paths (this file):
 
-- parameters live in one flat tensor (the module's parameters become views of it), so Adam and gradient clipping are
-  a handful of ops per step instead of a handful per parameter tensor;
+- parameters live in one flat tensor (the module's parameters become views of it, so in-place resets write into it),
+  with flat Adam moments and gradients: clipping and Adam are a few ops per step, not a few per parameter tensor;
 - activations are feature-major (features, N): the long sample axis is the matmuls' inner/outer dimension and the
   per-feature batch-norm reductions are contiguous;
-- batch norm is folded into the following linear layer (``W diag(gamma rstd)``, shifted bias); its backward uses the
-  reductions the weight-gradient matmul already computes (one extra element-wise pass per BN layer);
-- hand-written backward (no autograd graph); the critic's input layer in eval mode is split into an observation part,
-  computed once per fitted iteration, and an action part for the G actor steps;
-- ``update_path="compiled"`` runs the same step functions through ``torch.compile`` with static shapes for the sample
-  count that repeats (the full buffer, or the mini-batch size), which fuses the element-wise passes around the matmuls;
-  while the buffer fills, the eager step functions run (a static compilation per N would be paid every episode).
+- batch norm is folded into the following linear layer (``W diag(gamma rstd)``, shifted bias); its backward reuses
+  the weight-gradient matmul's reductions; the backward is written by hand (no autograd graph);
+- the critic's first layer in eval mode is split into an observation part, computed once per actor fit, and an action
+  part for the G actor steps; targets and importance weights use the same eval-mode flat networks.
 
-Running statistics, Adam moments and the step count follow PyTorch's ``BatchNorm1d`` and ``Adam`` exactly (up to float
-rounding), so the fast and plain paths give the same result for the same seed (tested). Everything stays on the
-networks' device; the loops never wait for the device (per-step scalars go host -> device, nothing comes back).
+``update_path="fast"`` (default) runs :mod:`~sb3_denfac.denfac.eager_steps` (preallocated buffers, in-place ops,
+fused Adam); ``"compiled"`` runs :mod:`~sb3_denfac.denfac.compiled_steps` through ``torch.compile`` for the sample
+count that repeats (the full buffer, or the mini-batch size) and the eager steps while the buffer fills.
+
+Running statistics, Adam moments and step counts follow PyTorch's ``BatchNorm1d`` and ``Adam`` (up to float
+rounding), so fast and plain paths give the same result for the same seed (tested). Everything stays on the networks'
+device and the loops never wait for it (per-step scalars go host -> device, nothing comes back).
 """
 
 from __future__ import annotations
@@ -28,23 +29,7 @@ from dataclasses import dataclass
 import torch as th
 from torch import nn
 
-from sb3_denfac.common.inverting_gradients import invert_gradients
-from sb3_denfac.denfac import eager_steps
-
-
-def row_var_mean(x: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-    """Biased variance and mean of each row of a feature-major (C, N) tensor (two-pass, centred).
-
-    ``th.var_mean`` is many times slower than these two contiguous reductions on CPU.
-    """
-    mean = x.mean(1)
-    var = (x - mean.unsqueeze(1)).square_().mean(1)
-    return var, mean
-
-
-def _leaky_relu_backward(grad: th.Tensor, out: th.Tensor, slope: float) -> th.Tensor:
-    """d leaky_relu from its output (one fused kernel; ``where(out > 0, ...)`` takes three passes)."""
-    return th.ops.aten.leaky_relu_backward(grad, out, slope, True)
+from sb3_denfac.denfac import compiled_steps, eager_steps
 
 
 @dataclass
@@ -109,174 +94,6 @@ class _Spec:
             out.append((gamma, beta, weight, flat[offset : offset + d_out]))
             offset += d_out
         return out
-
-
-def _linear(weight: th.Tensor, bias: th.Tensor, h: th.Tensor, fuse_bias: bool) -> th.Tensor:
-    """weight @ h + bias[:, None]. Eagerly one addmm; compiled, mm + add so the add fuses into the next pointwise."""
-    if fuse_bias:
-        return th.mm(weight, h) + bias.unsqueeze(1)
-    return th.addmm(bias.unsqueeze(1), weight, h)
-
-
-def _train_forward(spec: _Spec, flat: th.Tensor, x: th.Tensor, stats0: tuple[th.Tensor, th.Tensor] | None, fuse: bool = False):
-    """Train-mode forward on feature-major x (features, N); returns output, cache and BN batch (mean, var)s."""
-    cache, stats = [], []
-    h = x
-    for i, (gamma, beta, weight, bias) in enumerate(spec.unpack(flat)):
-        if gamma is not None:
-            var, mean = stats0 if (i == 0 and stats0 is not None) else row_var_mean(h)
-            rstd = th.rsqrt(var + spec.eps[i])
-            scale = gamma * rstd
-            w_eff = weight * scale
-            b_eff = bias + weight @ (beta - mean * scale)
-            stats.append((mean, var))
-            cache.append((h, mean, rstd, w_eff))
-        else:
-            w_eff, b_eff = weight, bias
-            cache.append((h, None, None, w_eff))
-        z = _linear(w_eff, b_eff, h, fuse)
-        h = th.nn.functional.leaky_relu(z, spec.slopes[i]) if spec.slopes[i] is not None else z
-    cache.append((h, None, None, None))
-    return h, cache, stats
-
-
-def _backward(spec: _Spec, flat: th.Tensor, cache: list, grad_out: th.Tensor, input_grad: bool = False):
-    """Flat parameter gradient (and d loss / d input if ``input_grad``) of a train-mode forward."""
-    params = spec.unpack(flat)
-    grads: list[th.Tensor] = []
-    n = grad_out.shape[1]
-    dz, dx = grad_out, None
-    for i in range(len(params) - 1, -1, -1):
-        gamma, beta, weight, _ = params[i]
-        if spec.slopes[i] is not None:
-            dz = _leaky_relu_backward(dz, cache[i + 1][0], spec.slopes[i])
-        h, mean, rstd, w_eff = cache[i]
-        row_sum = dz.sum(1)
-        m = dz @ h.t()  # sum_n dz x^T, (out, in)
-        need_dx = i > 0 or input_grad
-        if gamma is None:
-            layer_grads = [m, row_sum]
-            if need_dx:
-                dx = weight.t() @ dz
-        else:
-            t = (m - row_sum[:, None] * mean[None, :]) * rstd  # sum_n dz xhat^T
-            d_weight = t * gamma + row_sum[:, None] * beta[None, :]
-            d_beta = row_sum @ weight  # sum_n dL/dh
-            d_gamma = (weight * t).sum(0)  # sum_n dL/dh * xhat
-            layer_grads = [d_gamma, d_beta, d_weight, row_sum]
-            if need_dx:
-                # dx = rstd (g - mean_n g - xhat mean_n(g xhat)), g = gamma dL/dh: an affine map of x per feature
-                rstd2_b = rstd * rstd * gamma * d_gamma / n
-                dx = th.addmm((rstd2_b * mean - rstd * gamma * d_beta / n).unsqueeze(1), w_eff.t(), dz)
-                dx = dx - h * rstd2_b.unsqueeze(1)
-        grads = layer_grads + grads
-        dz = dx  # type: ignore[assignment]
-    return th.cat([g.reshape(-1) for g in grads]), dx
-
-
-def _adam_(flat, grad, exp_avg, exp_avg_sq, step_size, bias_correction2_sqrt, beta1, beta2, eps, max_grad_norm) -> None:
-    """In-place Adam step (torch.optim.Adam's arithmetic) after global-norm clipping (clip_grad_norm_'s)."""
-    if max_grad_norm is not None:
-        grad = grad * th.clamp(max_grad_norm / (th.linalg.vector_norm(grad) + 1e-6), max=1.0)
-    exp_avg.lerp_(grad, 1 - beta1)
-    exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
-    denom = (exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(eps)
-    flat.sub_(step_size * exp_avg / denom)
-
-
-def _update_running_(running: list, stats: list, scalars: th.Tensor, n: int) -> None:
-    """BatchNorm1d's running-statistics update; ``scalars[2 + j]`` is BN layer j's averaging factor."""
-    for j in range(len(running)):
-        running_mean, running_var, batches = running[j]
-        mean, var = stats[j]
-        batches.add_(1)
-        running_mean.lerp_(mean, scalars[2 + j])
-        running_var.lerp_(var * (n / (n - 1)), scalars[2 + j])
-
-
-def _make_critic_step(spec: _Spec, betas: tuple[float, float], eps: float, max_grad_norm: float | None, fuse: bool = False):
-    def critic_step(flat, exp_avg, exp_avg_sq, scalars, running, x, stats0, q, c):
-        out, cache, stats = _train_forward(spec, flat, x, stats0, fuse)
-        _update_running_(running, stats, scalars, x.shape[1])
-        diff = out - q
-        weighted = c * diff
-        loss = (weighted * diff).mean()
-        grad, _ = _backward(spec, flat, cache, weighted * (2.0 / x.shape[1]))
-        _adam_(flat, grad, exp_avg, exp_avg_sq, scalars[0], scalars[1], betas[0], betas[1], eps, max_grad_norm)
-        return loss
-
-    return critic_step
-
-
-def _make_actor_step(
-    spec: _Spec,
-    critic_slopes: tuple,
-    betas: tuple[float, float],
-    eps: float,
-    max_grad_norm: float | None,
-    inverting: bool,
-    fuse: bool = False,
-):
-    def actor_step(flat, exp_avg, exp_avg_sq, scalars, running, obs, obs_part, w_act, critic_affines):
-        pi, cache, stats = _train_forward(spec, flat, obs, None, fuse)
-        _update_running_(running, stats, scalars, obs.shape[1])
-        # Critic in eval mode on (s, pi(s)) (BN folded with running statistics), then d mean(Q) / d pi by hand.
-        if fuse:  # obs_part + w_act @ pi as broadcasts: one fused pass with the activation (few actions)
-            z = obs_part
-            for a in range(pi.shape[0]):
-                z = z + w_act[:, a : a + 1] * pi[a : a + 1]
-        else:
-            z = th.addmm(obs_part, w_act, pi)
-        outs = []
-        for i, (weight, bias) in enumerate(critic_affines):
-            if i > 0:
-                z = _linear(weight, bias, outs[-1], fuse)
-            outs.append(th.nn.functional.leaky_relu(z, critic_slopes[i]) if critic_slopes[i] is not None else z)
-        objective = outs[-1].mean()
-        dz = th.full_like(outs[-1], 1.0 / pi.shape[1])
-        n_layers = len(critic_affines)
-        last = 1 if (fuse and n_layers > 1) else 0
-        for i in range(n_layers - 1, last - 1, -1):
-            if critic_slopes[i] is not None:
-                dz = _leaky_relu_backward(dz, outs[i], critic_slopes[i])
-            if i == last == 1:
-                break  # dz = dL/dz_2, finished below
-            dz = (critic_affines[i][0] if i > 0 else w_act).t() @ dz
-        if last == 1:
-            # dz = dL/dz_2 (small). d/dpi_a = sum_k dz[k] sum_j W2[k, j] w_act[j, a] D1[j]: one (A*K, H) @ (H, N) matmul on
-            # the activation derivative D1, instead of materialising the wide (H, N) gradient twice.
-            slope0 = critic_slopes[0]
-            d1 = th.where(outs[0] > 0, 1.0, slope0) if slope0 is not None else th.ones_like(outs[0])
-            w2 = critic_affines[1][0]
-            stacked = (w2.unsqueeze(0) * w_act.t().unsqueeze(1)).reshape(-1, w2.shape[1])  # (A*K, H)
-            dz = (th.mm(stacked, d1).view(w_act.shape[1], w2.shape[0], -1) * dz.unsqueeze(0)).sum(1)
-        if inverting:
-            dz = invert_gradients(dz, pi, -th.ones_like(objective), th.ones_like(objective))
-        grad, _ = _backward(spec, flat, cache, -dz)
-        _adam_(flat, grad, exp_avg, exp_avg_sq, scalars[0], scalars[1], betas[0], betas[1], eps, max_grad_norm)
-        return objective
-
-    return actor_step
-
-
-_STEP_FUNCTIONS: dict = {}
-
-
-def _step_function(kind: str, compiled_size: int | None, *key):
-    """The step function for a static key: eager, or ``torch.compile``d for the fixed sample count ``compiled_size``.
-
-    Compiled functions are specialised to one N (static shapes generate much faster code than dynamic ones), so they
-    are used only for the size that repeats: the full buffer (or the mini-batch size); a filling buffer runs eagerly.
-    Cached per process, so the compilation is paid once.
-    """
-    cache_key = (kind, compiled_size, key)
-    if cache_key not in _STEP_FUNCTIONS:
-        factory = _make_critic_step if kind == "critic" else _make_actor_step
-        if compiled_size is None:
-            _STEP_FUNCTIONS[cache_key] = factory(*key)
-        else:
-            _STEP_FUNCTIONS[cache_key] = th.compile(factory(*key, fuse=True), dynamic=False)
-    return _STEP_FUNCTIONS[cache_key]
 
 
 class _FlatNet:
@@ -426,8 +243,9 @@ class FastUpdate:
         """Samples per step: the whole buffer, or the mini-batch (as ``DENFAC._batch_indices`` draws it)."""
         return n_full if self.batch_size is None or self.batch_size >= n_full else self.batch_size
 
-    def _size_key(self, n: int) -> int | None:
-        return n if n == self.compiled_size else None
+    def _compiled(self, n: int) -> bool:
+        """Whether steps over ``n`` samples run compiled."""
+        return n == self.compiled_size
 
     def write_back(self) -> None:
         self.actor.write_back()
@@ -460,7 +278,7 @@ class FastUpdate:
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
         n = self._sample_count(n_full)
-        if self._size_key(n) is not None:
+        if self._compiled(n):
             return self._fit_critic_compiled(inputs, q_t, c_t, steps, max_grad_norm, batch_indices)
         # Eager: the first layer's BN statistics of the fixed data are computed once per fit (full batch).
         ws = eager_steps.Workspace(net.spec.sizes, n, inputs)
@@ -479,13 +297,13 @@ class FastUpdate:
 
     def _fit_critic_compiled(self, inputs, q_t, c_t, steps, max_grad_norm, batch_indices) -> th.Tensor:
         net = self.critic
-        full_stats = row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
+        full_stats = compiled_steps.row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
         loss = th.zeros((), device=inputs.device)
         running = net.running()
         for _ in range(steps):
             idx = batch_indices(inputs.shape[1])
             x, q, c = (inputs, q_t, c_t) if idx is None else (inputs[:, idx], q_t[:, idx], c_t[:, idx])
-            step = _step_function("critic", self._size_key(x.shape[1]), net.spec, net.betas, net.eps, max_grad_norm)
+            step = compiled_steps.compiled_step("critic", x.shape[1], net.spec, net.betas, net.eps, max_grad_norm)
             stats0 = full_stats if idx is None else None
             loss = step(net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, x, stats0, q, c)
         return loss
@@ -502,7 +320,7 @@ class FastUpdate:
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         n_full = obs_t.shape[1]
         n = self._sample_count(n_full)
-        if self._size_key(n) is not None:
+        if self._compiled(n):
             return self._fit_actor_compiled(
                 obs_t, critic_affines, w_act, obs_part_full, steps, max_grad_norm, inverting, batch_indices
             )
@@ -529,7 +347,7 @@ class FastUpdate:
             idx = batch_indices(obs_t.shape[1])
             o, obs_part = (obs_t, obs_part_full) if idx is None else (obs_t[:, idx], obs_part_full[:, idx])
             key = (net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting)
-            step = _step_function("actor", self._size_key(o.shape[1]), *key)
+            step = compiled_steps.compiled_step("actor", o.shape[1], *key)
             objective = step(
                 net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, o, obs_part, w_act, critic_affines
             )
