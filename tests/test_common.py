@@ -8,7 +8,11 @@ from hypothesis import strategies as st
 from scipy import stats
 from torch import nn
 
-from sb3_denfac.common.inverting_gradients import invert_gradients, inverting_gradient_actor_backward
+from sb3_denfac.common.inverting_gradients import (
+    invert_gradients,
+    invert_gradients_unit_box,
+    inverting_gradient_actor_backward,
+)
 from sb3_denfac.common.networks import create_bn_mlp, flat_parameters, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import (
     clamp_mean,
@@ -97,6 +101,14 @@ def test_inverting_gradients_scale_as_hausknecht_and_stone():
     out = invert_gradients(grad, actions, th.tensor(-1.0), th.tensor(1.0))
     # increase: scaled by (a_max - a)/span; decrease: scaled by (a - a_min)/span
     th.testing.assert_close(out, th.tensor([2 * 0.25, 2 * 0.75, -2 * 0.75, -2 * 0.25]))
+
+
+@settings(max_examples=80, deadline=None)
+@given(grad=st.floats(-10, 10), action=st.floats(-3, 3))
+def test_inverting_gradients_unit_box_equals_general_rule(grad, action):
+    general = invert_gradients(th.tensor([grad]), th.tensor([action]), th.tensor(-1.0), th.tensor(1.0))
+    unit = invert_gradients_unit_box(th.tensor([grad]), th.tensor([action]))
+    th.testing.assert_close(unit, general, rtol=1e-6, atol=0.0)
 
 
 def test_inverting_gradient_actor_keeps_actions_in_bounds():

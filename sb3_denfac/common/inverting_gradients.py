@@ -22,6 +22,15 @@ def invert_gradients(dq_da: th.Tensor, actions: th.Tensor, low: th.Tensor, high:
     return th.where(dq_da > 0, dq_da * (high - actions) / span, dq_da * (actions - low) / span)
 
 
+def invert_gradients_unit_box(dq_da: th.Tensor, actions: th.Tensor, out: th.Tensor | None = None) -> th.Tensor:
+    """:func:`invert_gradients` for the bounds [-1, 1] (SB3's scaled action space) in a few in-place passes.
+
+    There the rule is g (1 - sign(g) a) / 2: (1 - a) / 2 for g > 0, (a + 1) / 2 for g < 0, 0 for g = 0; the same
+    float operations as the general form, without its branches and temporaries. Written into ``out`` if given.
+    """
+    return th.sign(dq_da, out=out).mul_(actions).neg_().add_(1.0).mul_(dq_da).mul_(0.5)
+
+
 def inverting_gradient_actor_backward(q_values: th.Tensor, actions: th.Tensor, low: th.Tensor, high: th.Tensor) -> th.Tensor:
     """Back-propagate the inverted gradient of ``mean(Q(s, pi(s)))`` into the actor parameters.
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import torch as th
 from torch.nn import functional as F  # noqa: N812
 
-from sb3_denfac.common.inverting_gradients import invert_gradients
+from sb3_denfac.common.inverting_gradients import invert_gradients_unit_box
 
 
 def _activate_(h: th.Tensor, slope: float | None) -> th.Tensor:
@@ -211,6 +211,7 @@ class EvalCritic:
         self.w_act = affines[0][0][:, -action_dim:].contiguous()
         self.w_act_t = self.w_act.t()
         self.ws = Workspace(sizes, n, obs_part)
+        self.grad, self.inverted = (obs_part.new_empty((action_dim, n)) for _ in range(2))
         w_last, b_last = affines[-1]
         # d mean_n Q / d (last hidden output) = w_last / N for every sample: a broadcast view, made once
         self.dq_dh_last = (w_last[0] / n).unsqueeze(1).expand(w_last.shape[1], n)
@@ -228,7 +229,7 @@ class EvalCritic:
         affines, slopes, ws, n_layers = self.affines, self.slopes, self.ws, len(self.affines)
         if n_layers == 1:  # linear critic
             value = self.obs_part.mean() + th.dot(self.w_act[0], pi.mean(1)) if want_value else None
-            return (self.w_act_t / pi.shape[1]).expand_as(pi).contiguous(), value
+            return self.grad.copy_((self.w_act_t / pi.shape[1]).expand_as(pi)), value
         h = ws.outputs[0]
         if pi.shape[0] == 1:  # a rank-1 update: one pass instead of addmm's two
             th.addcmul(self.obs_part, self.w_act, pi, out=h)
@@ -248,7 +249,7 @@ class EvalCritic:
         for i in range(last, 0, -1):
             dh = th.mm(affines[i][0].t(), dz, out=ws.input_grads[i])
             dz = _activation_backward_(dh, ws.outputs[i - 1], slopes[i - 1])
-        return th.mm(self.w_act_t, dz), value
+        return th.mm(self.w_act_t, dz, out=self.grad), value
 
 
 def actor_step(
@@ -266,7 +267,7 @@ def actor_step(
     pi = ws.outputs[-1]
     ascent, objective = critic.action_gradient(pi, want_objective)
     if inverting:
-        ascent = invert_gradients(ascent, pi, -1.0, 1.0)  # type: ignore[arg-type]
+        ascent = invert_gradients_unit_box(ascent, pi, out=critic.inverted)
     backward(net, ws, obs, folds, ascent.neg_())
     adam_step(net, max_grad_norm)
     return objective
