@@ -11,7 +11,7 @@ DENFAC's own update with ``update_path`` "compiled", "fast" and "plain", against
 
 Medians over repeats; results with ratios go to ``benchmarks/results/update_cost.{md,json}``.
 
-Usage: ``python benchmarks/update_cost.py [--repeats 5] [--threads 1]``
+Usage: ``python benchmarks/update_cost.py [--repeats 9] [--threads 1 2] [--settings acrobot half_cheetah]``
 """
 
 from __future__ import annotations
@@ -220,113 +220,125 @@ def denfac_update(cfg: dict, path: str):
     return model._update, time.perf_counter() - start
 
 
+def time_setting(name: str, repeats: int) -> dict:
+    """Interleaved medians of every variant for one setting at the current thread count."""
+    cfg = SETTINGS[name]
+    compiled_fn, compile_first = denfac_update(cfg, "compiled")
+    fast_fn, fast_first = denfac_update(cfg, "fast")
+    plain_fn, _ = denfac_update(cfg, "plain")
+    data = {k: th.as_tensor(v) for k, v in random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]).items()}
+    nets = dict(
+        actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
+        critic=reference_mlp(cfg["obs_dim"] + cfg["action_dim"], 1, cfg["qf"]),
+    )
+    big = (th.randn(MATMUL_SIZE, MATMUL_SIZE), th.randn(MATMUL_SIZE, MATMUL_SIZE))
+    variants = dict(
+        compiled=compiled_fn,
+        fast=fast_fn,
+        plain=plain_fn,
+        reference=lambda d=data, c=cfg, n=nets: reference_update(d, c, n),
+        ddpg=ddpg_episode(cfg),
+        matmul=lambda a=big[0], b=big[1]: a @ b,
+    )
+    # Interleaved: every repeat times each variant back to back, so load changes on the shared machine hit all.
+    times: dict[str, list[float]] = {k: [] for k in variants}
+    for fn in variants.values():
+        fn()  # warm-up
+    for _ in range(repeats):
+        for key, fn in variants.items():
+            start = time.perf_counter()
+            fn()
+            times[key].append(time.perf_counter() - start)
+    compiled, fast, plain, reference, ddpg, matmul = (float(np.median(times[k])) for k in variants)
+    gflops = 2 * MATMUL_SIZE**3 / matmul / 1e9
+    flops = update_flops(cfg)
+    floor = flops / (gflops * 1e9)
+    return dict(
+        config=cfg,
+        threads=th.get_num_threads(),
+        update_gflop=flops / 1e9,
+        matmul_gflops_per_s=gflops,
+        floor_s=floor,
+        compiled_s=compiled,
+        compiled_first_update_s=compile_first,
+        fast_s=fast,
+        fast_first_update_s=fast_first,
+        plain_s=plain,
+        reference_s=reference,
+        ddpg_episode_s=ddpg,
+        ddpg_episode_with_8_additional_updates_s=9 * ddpg,
+        compiled_speedup_vs_reference=reference / compiled,
+        compiled_over_floor=compiled / floor,
+        fast_speedup_vs_reference=reference / fast,
+        fast_over_floor=fast / floor,
+        plain_speedup_vs_reference=reference / plain,
+        fast_over_ddpg_episode=fast / ddpg,
+        times_s=times,
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=9)
+    parser.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="torch thread counts, each a full run")
     parser.add_argument("--settings", nargs="+", default=list(SETTINGS))
     args = parser.parse_args()
-    th.set_num_threads(args.threads)
     th.manual_seed(0)
+    commit = os.popen("git rev-parse --short HEAD 2>/dev/null").read().strip() or "unknown"
     results: dict = dict(
         meta=dict(
             threads=args.threads,
             repeats=args.repeats,
             torch=th.__version__,
+            commit=commit,
             K=K,
             critic_steps=CRITIC_STEPS,
             G=G,
             machine=f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores (shared with other jobs)",
             load_average=os.getloadavg(),
         ),
-        settings={},
+        runs=[],
     )
-    for name in args.settings:
-        cfg = SETTINGS[name]
-        compiled_fn, compile_first = denfac_update(cfg, "compiled")
-        fast_fn, _ = denfac_update(cfg, "fast")
-        plain_fn, _ = denfac_update(cfg, "plain")
-        data = {k: th.as_tensor(v) for k, v in random_data(cfg["buffer_size"], cfg["obs_dim"], cfg["action_dim"]).items()}
-        nets = dict(
-            actor=reference_mlp(cfg["obs_dim"], cfg["action_dim"], cfg["pi"]),
-            critic=reference_mlp(cfg["obs_dim"] + cfg["action_dim"], 1, cfg["qf"]),
-        )
-        big = (th.randn(MATMUL_SIZE, MATMUL_SIZE), th.randn(MATMUL_SIZE, MATMUL_SIZE))
-        variants = dict(
-            compiled=compiled_fn,
-            fast=fast_fn,
-            plain=plain_fn,
-            reference=lambda d=data, c=cfg, n=nets: reference_update(d, c, n),
-            ddpg=ddpg_episode(cfg),
-            matmul=lambda a=big[0], b=big[1]: a @ b,
-        )
-        # Interleaved: every repeat times each variant back to back, so load changes on the shared machine hit all.
-        times: dict[str, list[float]] = {k: [] for k in variants}
-        for fn in variants.values():
-            fn()  # warm-up
-        for _ in range(args.repeats):
-            for key, fn in variants.items():
-                start = time.perf_counter()
-                fn()
-                times[key].append(time.perf_counter() - start)
-        compiled, fast, plain, reference, ddpg, matmul = (float(np.median(times[k])) for k in variants)
-        gflops = 2 * MATMUL_SIZE**3 / matmul / 1e9
-        flops = update_flops(cfg)
-        floor = flops / (gflops * 1e9)
-        results["settings"][name] = dict(
-            config=cfg,
-            update_gflop=flops / 1e9,
-            matmul_gflops_per_s=gflops,
-            floor_s=floor,
-            compiled_s=compiled,
-            compiled_first_update_s=compile_first,
-            fast_s=fast,
-            plain_s=plain,
-            reference_s=reference,
-            ddpg_episode_s=ddpg,
-            ddpg_episode_with_8_additional_updates_s=9 * ddpg,
-            compiled_speedup_vs_reference=reference / compiled,
-            compiled_over_floor=compiled / floor,
-            fast_speedup_vs_reference=reference / fast,
-            fast_over_floor=fast / floor,
-            plain_speedup_vs_reference=reference / plain,
-            compiled_over_ddpg_episode=compiled / ddpg,
-            times_s=times,
-        )
-        print(name, json.dumps(results["settings"][name], indent=1), flush=True)
+    for threads in args.threads:
+        th.set_num_threads(threads)
+        for name in args.settings:
+            run = dict(setting=name, **time_setting(name, args.repeats))
+            results["runs"].append(run)
+            print(name, threads, json.dumps({k: v for k, v in run.items() if k != "times_s"}, indent=1), flush=True)
     results["meta"]["load_average_end"] = os.getloadavg()
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "update_cost.json").write_text(json.dumps(results, indent=1))
+    meta = results["meta"]
     lines = [
         "# Cost of one DENFAC update (K=10, critic_steps=10, G=25, full batch)",
         "",
-        f"{results['meta']['machine']}; torch {th.__version__}, {args.threads} thread(s); medians of {args.repeats} "
-        f"interleaved repeats; load average {results['meta']['load_average'][0]:.1f} "
-        f"at start, {results['meta']['load_average_end'][0]:.1f} at end.",
+        f"{meta['machine']}; torch {th.__version__}; commit {commit}; medians of {args.repeats} interleaved repeats; "
+        f"load average {meta['load_average'][0]:.1f} at start, {meta['load_average_end'][0]:.1f} at end.",
         "",
-        "| setting | D | compiled (s) | fast (s) | plain (s) | reference (s) | floor (s) | GFLOP/update | matmul GFLOP/s "
-        "| reference / compiled | compiled / floor | reference / fast | fast / floor | DDPG episode (s) | DDPG x9 (s) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| setting | D | threads | fast (s) | compiled (s) | plain (s) | reference (s) | floor (s) | GFLOP/update "
+        "| matmul GFLOP/s | reference / fast | fast / floor | reference / compiled | compiled / floor | DDPG episode (s) "
+        "| DDPG x9 (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name, r in results["settings"].items():
+    for r in results["runs"]:
         lines.append(
-            f"| {name} | {r['config']['buffer_size']} | {r['compiled_s']:.3f} | {r['fast_s']:.3f} | {r['plain_s']:.3f} | "
-            f"{r['reference_s']:.3f} | {r['floor_s']:.3f} | {r['update_gflop']:.2f} | {r['matmul_gflops_per_s']:.1f} | "
-            f"{r['compiled_speedup_vs_reference']:.1f}x | {r['compiled_over_floor']:.1f}x | "
-            f"{r['fast_speedup_vs_reference']:.1f}x | {r['fast_over_floor']:.1f}x | {r['ddpg_episode_s']:.3f} | "
+            f"| {r['setting']} | {r['config']['buffer_size']} | {r['threads']} | {r['fast_s']:.3f} | {r['compiled_s']:.3f} | "
+            f"{r['plain_s']:.3f} | {r['reference_s']:.3f} | {r['floor_s']:.3f} | {r['update_gflop']:.2f} | "
+            f"{r['matmul_gflops_per_s']:.1f} | **{r['fast_speedup_vs_reference']:.1f}x** | **{r['fast_over_floor']:.1f}x** | "
+            f"{r['compiled_speedup_vs_reference']:.1f}x | {r['compiled_over_floor']:.1f}x | {r['ddpg_episode_s']:.3f} | "
             f"{r['ddpg_episode_with_8_additional_updates_s']:.3f} |"
         )
     lines += [
         "",
-        "- compiled / fast / plain: DENFAC's `update_path` (compiled = the fast step functions through torch.compile; "
-        "its first update, which compiles, took "
-        + ", ".join(f"{n} {r['compiled_first_update_s']:.0f} s" for n, r in results["settings"].items())
+        "- fast / compiled / plain: DENFAC's `update_path` (fast = the default eager steps of `eager_steps.py`; compiled = "
+        "`compiled_steps.py` through torch.compile, whose first update compiles: "
+        + ", ".join(f"{r['setting']} {r['threads']} thread(s) {r['compiled_first_update_s']:.0f} s" for r in results["runs"])
         + "); reference: straightforward PyTorch in this file (modules and Adam rebuilt at resets, autograd).",
         "- floor: matmul FLOPs of the update (forward, weight and input gradients; elementwise work not counted) / GFLOP/s "
-        "of a 1024x1024 float32 matmul timed in the same interleaved repeats.",
+        "of a 1024x1024 float32 matmul timed in the same interleaved repeats (and thread count).",
         f"- DDPG: SB3 DDPG `train()` for one {EPISODE_STEPS}-step episode (one batch-64 gradient step per transition, "
         "same networks without batch norm); x9 = with the paper's 8 additional updates per step.",
-        "- Targets (issue 7): reference / fast >= 5x and fast / floor <= 4x.",
+        "- Targets (issue 7, paper's Acrobot settings): reference / fast >= 5x and fast / floor <= 4x.",
     ]
     (RESULTS / "update_cost.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
