@@ -18,6 +18,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_leaves
 
 from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
+from sb3_denfac.denfac.fast import FastUpdate, supported_networks
 
 SMALL = dict(
     buffer_size=200,
@@ -308,6 +309,30 @@ def test_fast_path_allocates_nothing_per_step(inverting_gradients):
     assert fast[0] == fast[1], fast
     plain = [_large_allocations_per_update("plain", steps, inverting_gradients) for steps in (2, 6)]
     assert plain[1] > plain[0] + 8, plain
+
+
+@pytest.mark.parametrize("batch_size", [None, 16])
+def test_fast_path_is_device_agnostic(batch_size):
+    """The fast update runs on PyTorch's "meta" device (shapes only, no data): a tensor made on the CPU by default,
+    a host read of device data or a CPU-only kernel would raise. The stand-in for device="cuda" on GPU-less CI."""
+    model = make_model(batch_size=batch_size, policy_kwargs=dict(net_arch=dict(pi=[8, 8], qf=[16, 4])))
+    policy = model.policy.to("meta")
+    fast = FastUpdate(policy, *supported_networks(policy), batch_size=batch_size)
+    n = 64
+    obs, actions = th.randn(n, 3, device="meta"), th.randn(n, 1, device="meta")
+    q_targets, weights = th.randn(n, 1, device="meta"), th.rand(n, 1, device="meta")
+
+    def batch_indices(size):
+        return None if batch_size is None else th.randperm(size, device="meta")[:batch_size]
+
+    assert fast.actor_eval(obs).device.type == "meta" and fast.actor_eval(obs).shape == (n, 1)
+    assert fast.critic_eval(obs, actions).shape == (n, 1)
+    for net, flat in ((policy.critic, fast.critic), (policy.actor, fast.actor)):
+        model._reset_bn_statistics(net, flat)  # as every fit of DENFAC._update does
+    loss = fast.fit_critic(obs, actions, q_targets, weights, 3, 10.0, batch_indices)
+    objective = fast.fit_actor(obs, 3, 10.0, True, batch_indices)
+    fast.write_back()
+    assert loss.device.type == objective.device.type == "meta"
 
 
 def test_update_path_errors():

@@ -108,7 +108,7 @@ class _FlatNet:
             p.data = self.flat[offset : offset + p.numel()].view_as(p)
             offset += p.numel()
         self.bn_layers = [layer.bn for layer in layers if layer.bn is not None]
-        self.bn_counts = [int(bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[arg-type]
+        self.bn_counts: list[int] | None = None  # host copies of num_batches_tracked, read when first needed
         self.optimizer = optimizer
         group = optimizer.param_groups[0]
         self.lr, self.betas, self.eps = float(group["lr"]), tuple(group["betas"]), float(group["eps"])
@@ -137,6 +137,8 @@ class _FlatNet:
     def advance(self) -> list[float]:
         """Advance the Adam step and the BN counts (host copies: no device sync); the BN averaging factors."""
         self.step_count += 1
+        if self.bn_counts is None:  # a device read, avoided when the statistics were reset (DENFAC's default)
+            self.bn_counts = [int(bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[arg-type]
         factors = []
         for j, bn in enumerate(self.bn_layers):
             self.bn_counts[j] += 1
@@ -156,7 +158,7 @@ class _FlatNet:
         ``num_batches_tracked`` (the eager steps count on the host only)."""
         if fixed is not None:
             fixed.apply(self.bn_layers[0])
-        for bn, count in zip(self.bn_layers, self.bn_counts, strict=True):
+        for bn, count in zip(self.bn_layers, self.bn_counts or [], strict=False):
             bn.num_batches_tracked.fill_(count)  # type: ignore[union-attr]
 
     def running(self) -> list[tuple[th.Tensor, th.Tensor, th.Tensor]]:
