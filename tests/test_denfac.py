@@ -17,7 +17,8 @@ from torch import nn
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_leaves
 
-from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
+from sb3_denfac.common.inverting_gradients import invert_gradients_unit_box
+from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer, eager_steps
 from sb3_denfac.denfac.fast import FastUpdate, supported_networks
 
 SMALL = dict(
@@ -49,6 +50,24 @@ class TargetActionEnv(gym.Env):
         reward = -((scaled - 0.6) ** 2)
         truncated = self.t >= self.episode_length
         return self.np_random.uniform(-1, 1, 2).astype(np.float32), reward, False, truncated, {}
+
+
+class MultiActionEnv(gym.Env):
+    """4-d observations, 3-d actions, reward -|a - obs[:3] / 2|^2 (for the several-action code paths)."""
+
+    def __init__(self):
+        self.observation_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.obs = self.np_random.uniform(-1, 1, 4).astype(np.float32)
+        return self.obs, {}
+
+    def step(self, action):
+        reward = -float(np.sum((np.asarray(action) - self.obs[:3] / 2) ** 2))
+        self.obs = self.np_random.uniform(-1, 1, 4).astype(np.float32)
+        return self.obs, reward, False, False, {}
 
 
 def make_model(env=None, **kwargs) -> DENFAC:
@@ -234,6 +253,10 @@ def test_learns_target_action():
         dict(),
         dict(reset_critic=True, weighting="retrace_next_state_quirk"),
         dict(inverting_gradients=False, batch_size=32, reset_actor=False),
+        # several actions (the critic's action input as a matmul) and a deeper actor (BN backward through the input);
+        # PyTorch's init: from N(0, 0.01) weights many actor gradient components are rounding-sized, and Adam with
+        # beta1 = 0 turns their sign into lr-sized steps (the gradients themselves agree: test_eager_gradients_...)
+        dict(env="multi_action", policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]), init="default")),
     ],
 )
 def test_fast_and_plain_paths_agree(kwargs):
@@ -242,7 +265,11 @@ def test_fast_and_plain_paths_agree(kwargs):
     A moderate step size keeps the comparison meaningful: with beta1 = 0 Adam's first steps are lr * sign(g), so at
     large rates float rounding in near-zero gradient components is amplified (both paths are then equally valid).
     """
-    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    kwargs = dict(kwargs)
+    if kwargs.pop("env", None) == "multi_action":
+        env = gym.wrappers.TimeLimit(MultiActionEnv(), max_episode_steps=50)
+    else:
+        env = gym.make("Pendulum-v1", max_episode_steps=50)
     models = {}
     for path in ("plain", "fast"):
         models[path] = make_model(env, update_path=path, learning_rate=0.01, **kwargs).learn(100)
@@ -333,6 +360,64 @@ def test_fast_path_is_device_agnostic(batch_size):
     objective = fast.fit_actor(obs, 3, 10.0, True, batch_indices)
     fast.write_back()
     assert loss.device.type == objective.device.type == "meta"
+
+
+@pytest.mark.parametrize("inverting_gradients", [True, False])
+def test_eager_gradients_equal_autograd(inverting_gradients):
+    """One critic and one actor gradient of the eager fast steps equal autograd's on the modules (no Adam in between
+    to amplify rounding), with several actions, two BN layers per network and random BN parameters and statistics."""
+    th.manual_seed(0)
+    env = gym.wrappers.TimeLimit(MultiActionEnv(), max_episode_steps=50)
+    policy = make_model(env, policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]))).policy
+    for module in policy.modules():
+        if isinstance(module, nn.Linear):
+            nn.init.normal_(module.weight, std=0.5)
+            nn.init.normal_(module.bias, std=0.1)
+        if isinstance(module, nn.BatchNorm1d):
+            nn.init.normal_(module.weight, 1.0, 0.2)
+            nn.init.normal_(module.bias, 0.0, 0.2)
+            module.running_mean.normal_()
+            module.running_var.uniform_(0.5, 2.0)
+    n = 64
+    obs, actions, q_targets, weights = th.randn(n, 4), th.rand(n, 3) * 2 - 1, th.randn(n, 1), th.rand(n, 1)
+    # autograd on the modules (the plain path's losses)
+    policy.critic.set_training_mode(True)
+    loss = (weights * (policy.critic(obs, actions) - q_targets).pow(2)).mean()
+    critic_grad = th.cat([g.reshape(-1) for g in th.autograd.grad(loss, list(policy.critic.qf.parameters()))])
+    policy.critic.set_training_mode(False)
+    policy.actor.set_training_mode(True)
+    pi = policy.actor(obs)
+    q_values = policy.critic(obs, pi)
+    actor_params = list(policy.actor.mu.parameters())
+    if inverting_gradients:
+        (dq_da,) = th.autograd.grad(q_values.mean(), pi, retain_graph=True)
+        inverted = th.where(dq_da > 0, dq_da * (1 - pi) / 2, dq_da * (pi + 1) / 2).detach()
+        actor_grad = th.autograd.grad(pi, actor_params, grad_outputs=-inverted)
+    else:
+        actor_grad = th.autograd.grad(-q_values.mean(), actor_params)
+    actor_grad = th.cat([g.reshape(-1) for g in actor_grad])
+    policy.set_training_mode(False)
+    # the eager steps' forward and backward
+    fast = FastUpdate(policy, *supported_networks(policy))
+    with th.no_grad():
+        x = th.cat([obs, actions], 1).t().contiguous()
+        ws = eager_steps.Workspace(fast.critic.spec.sizes, n, x)
+        folds = eager_steps.forward_train(fast.critic, ws, x, None)
+        diff = ws.outputs[-1] - q_targets.t()
+        eager_steps.backward(fast.critic, ws, x, folds, diff * weights.t() * (2.0 / n))
+        th.testing.assert_close(fast.critic.grad, critic_grad, rtol=1e-5, atol=1e-6)
+        affines = fast.critic.eval_affines()
+        obs_part = th.addmm(affines[0][1].unsqueeze(1), affines[0][0][:, :-3], obs.t())
+        critic = eager_steps.EvalCritic(affines, fast.critic.spec.slopes, obs_part, 3, fast.critic.spec.sizes, n)
+        ws = eager_steps.Workspace(fast.actor.spec.sizes, n, x)
+        obs_t = obs.t().contiguous()
+        folds = eager_steps.forward_train(fast.actor, ws, obs_t, None)
+        ascent, value = critic.action_gradient(ws.outputs[-1], want_value=True)
+        assert value.item() == pytest.approx(q_values.mean().item(), rel=1e-5)
+        if inverting_gradients:
+            ascent = invert_gradients_unit_box(ascent, ws.outputs[-1])
+        eager_steps.backward(fast.actor, ws, obs_t, folds, -ascent)
+        th.testing.assert_close(fast.actor.grad, actor_grad, rtol=1e-5, atol=1e-6)
 
 
 def test_update_path_errors():
