@@ -257,6 +257,8 @@ def test_learns_target_action():
         # PyTorch's init: from N(0, 0.01) weights many actor gradient components are rounding-sized, and Adam with
         # beta1 = 0 turns their sign into lr-sized steps (the gradients themselves agree: test_eager_gradients_...)
         dict(env="multi_action", policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]), init="default")),
+        dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), bn_momentum=0.1)),  # running averages kept
+        dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), batch_norm=False)),
     ],
 )
 def test_fast_and_plain_paths_agree(kwargs):

@@ -89,9 +89,11 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
     :param update_path: "auto" (default: "fast" when the policy allows it, else "plain"), "fast" (hand-written
-        flat-parameter steps, eager), "compiled" (the same steps through ``torch.compile`` once the buffer is full:
-        fastest for long runs; the first full-buffer update of a process pays the compilation, seconds to a minute)
-        or "plain" (autograd on the modules). All compute the same update up to float rounding; see ``fast.py``.
+        flat-parameter steps with preallocated buffers and fused Adam, eager: about 5x faster than a straightforward
+        autograd update at the paper's Acrobot sizes on one CPU thread, see ``benchmarks/results/update_cost.md``),
+        "compiled" (``torch.compile``d steps once the buffer is full; the first full-buffer update of a process pays
+        the compilation, seconds to a minute; on CPU measured no faster than "fast") or "plain" (autograd on the
+        modules). All compute the same update up to float rounding; see ``fast.py``.
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -386,7 +388,7 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             if self.reset_critic:
                 self.policy.reset_critic()
                 if fast is not None:
-                    fast.critic.reset_adam()
+                    fast.critic.reset()
             self._reset_bn_statistics(self.critic, None if fast is None else fast.critic)
             if fast is None:
                 critic_loss = self._fit_critic(obs, actions, q_targets, weights)
@@ -397,7 +399,7 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             if self.reset_actor:
                 self.policy.reset_actor()
                 if fast is not None:
-                    fast.actor.reset_adam()
+                    fast.actor.reset()
             self._reset_bn_statistics(self.actor, None if fast is None else fast.actor)
             if self.actor_steps > 0:
                 if fast is None:

@@ -125,10 +125,12 @@ class _FlatNet:
             self.exp_avg_sq.copy_(th.cat([st["exp_avg_sq"].reshape(-1) for st in states]))  # type: ignore[index]
             self.step_count = int(float(states[0]["step"]))  # type: ignore[index]
 
-    def reset_adam(self) -> None:
+    def reset(self) -> None:
+        """Call after the network was re-initialised in place (weights and BN statistics): forget Adam's state."""
         self.exp_avg.zero_()
         self.exp_avg_sq.zero_()
         self.step_count = 0
+        self.reset_bn_counts()
 
     def reset_bn_counts(self) -> None:
         """Call after the running statistics were reset outside (num_batches_tracked back to 0)."""
