@@ -153,9 +153,12 @@ def update_flops(cfg: dict) -> float:
     actor, critic = [o, *cfg["pi"], a], [o + a, *cfg["qf"], 1]
     targets = 2 * linear_flops(n, actor, False, None) + linear_flops(n, critic, False, None)
     critic_step = linear_flops(n, critic, True, 1)
-    # actor step: actor forward + backward, critic forward + d/d action (first layer: action columns only)
-    actor_step = linear_flops(n, actor, True, 1) + linear_flops(n, critic, False, 1) + 2 * n * a * cfg["qf"][0]
-    return K * (targets + CRITIC_STEPS * critic_step + G * actor_step)
+    # actor step: actor forward + backward, critic forward + d/d action. The critic's first layer only through its
+    # action columns (forward and input gradient): its observation part is fixed over the G steps, once per iteration.
+    hidden = cfg["qf"][0]
+    critic_obs_part = 2 * n * o * hidden
+    actor_step = linear_flops(n, actor, True, 1) + linear_flops(n, critic, False, 1) - critic_obs_part + 2 * n * a * hidden
+    return K * (targets + critic_obs_part + CRITIC_STEPS * critic_step + G * actor_step)
 
 
 # ----- (c) SB3 DDPG ---------------------------------------------------------------------------------------------------

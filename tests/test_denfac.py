@@ -422,12 +422,36 @@ def test_eager_gradients_equal_autograd(inverting_gradients):
         th.testing.assert_close(fast.actor.grad, actor_grad, rtol=1e-5, atol=1e-6)
 
 
+class OneStepFirstEpisodeEnv(TargetActionEnv):
+    """The first episode ends after one step, later ones after ten."""
+
+    def reset(self, *, seed=None, options=None):
+        self.episode_length = 1 if not hasattr(self, "_started") else 10
+        self._started = True
+        return super().reset(seed=seed, options=options)
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_one_transition_buffer_waits_for_the_next_episode(update_path):
+    """Batch norm has no statistics for one sample: after a one-step first episode the update waits (no crash)."""
+    model = make_model(OneStepFirstEpisodeEnv(), update_path=update_path)
+    model.learn(1)
+    assert model.replay_buffer.size() == 1 and model._n_updates == 0
+    model.learn(10, reset_num_timesteps=False)
+    assert model._n_updates == 1
+
+
 def test_update_path_errors():
     with pytest.raises(ValueError, match="update_path"):
         make_model(update_path="turbo")
     model = make_model(update_path="fast", policy_kwargs=dict(optimizer_class=th.optim.SGD))
     with pytest.raises(ValueError, match="update_path=.fast. needs"):
         model.learn(60)
+    # Adam with device-side step counts (fused / capturable): the fast path keeps counts on the host, so refuse it
+    fused = dict(net_arch=dict(pi=[8], qf=[16, 4]), optimizer_kwargs=dict(fused=True))
+    with pytest.raises(ValueError, match="update_path=.fast. needs"):
+        make_model(update_path="fast", policy_kwargs=fused).learn(60)
+    assert np.isfinite(make_model(update_path="auto", policy_kwargs=fused).learn(60).logger.name_to_value["train/q_mean"])
 
 
 @pytest.mark.skipif(

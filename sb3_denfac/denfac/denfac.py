@@ -91,8 +91,9 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     :param update_path: "auto" (default: "fast" when the policy allows it, else "plain"), "fast" (hand-written
         flat-parameter steps with preallocated buffers and fused Adam, eager: about 5x faster than a straightforward
         autograd update at the paper's Acrobot sizes on one CPU thread, see ``benchmarks/results/update_cost.md``),
-        "compiled" (``torch.compile``d steps once the buffer is full; the first full-buffer update of a process pays
-        the compilation, seconds to a minute; on CPU measured no faster than "fast") or "plain" (autograd on the
+        "compiled" (``torch.compile``d steps for the sample count that repeats: the full buffer, or the mini-batch
+        size; the first such update of a process pays the compilation, seconds to a minute; on CPU measured no faster
+        than "fast") or "plain" (autograd on the
         modules). All compute the same update up to float rounding; see ``fast.py``.
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
@@ -343,6 +344,9 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         for net, rate in ((self.actor, self.actor_learning_rate), (self.critic, self.critic_learning_rate)):
             if rate is None:  # networks without their own rate follow SB3's learning_rate (schedule)
                 update_learning_rate(net.optimizer, self.lr_schedule(self._current_progress_remaining))
+        uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
+        if uses_batch_norm and self.replay_buffer.size() < 2:
+            return  # batch statistics of a single transition are undefined (a first episode of one step): wait
         for _ in range(gradient_steps):
             self._update()
 

@@ -5,8 +5,9 @@ handful of matmuls over (50, N) activations, so two costs dominate: per-op dispa
 update) and passes over the activations. These functions therefore
 
 - write every (features, N) intermediate into buffers preallocated once per fit (:class:`Workspace`), with ``out=``
-  and in-place ops: no per-step allocation (a fresh 1.2 MB tensor per op made glibc map and fault in pages, which
-  slowed updates 2-3x at random) and fewer passes over memory;
+  and in-place ops: no per-step allocation with full batches (a fresh 1.2 MB tensor per op made glibc map and fault
+  in pages, which slowed updates 2-3x at random) and fewer passes over memory; mini-batch steps allocate only the
+  gathered batch;
 - write gradients straight into views of one flat gradient tensor, and step Adam with PyTorch's fused Adam kernel
   (``torch._fused_adam_``, the kernel behind ``Adam(fused=True)``): one op instead of a dozen;
 - skip what the algorithm never reads: the loss of every critic step but the last, the objective of every actor step

@@ -18,7 +18,9 @@ count that repeats (the full buffer, or the mini-batch size) and the eager steps
 
 Running statistics, Adam moments and step counts follow PyTorch's ``BatchNorm1d`` and ``Adam`` (up to float
 rounding), so fast and plain paths give the same result for the same seed (tested). Everything stays on the networks'
-device and the loops never wait for it (per-step scalars go host -> device, nothing comes back).
+device and the steps never wait for it: per-step scalars go host -> device, and the only reads back are the logged
+losses at the end of an update and, with a set ``bn_momentum`` (no reset of the statistics), ``num_batches_tracked``
+once per update.
 """
 
 from __future__ import annotations
@@ -216,6 +218,8 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
         if type(opt) is not th.optim.Adam or len(opt.param_groups) != 1:
             return None
         if group.get("weight_decay", 0) != 0 or group.get("amsgrad") or group.get("maximize"):
+            return None
+        if group.get("capturable") or group.get("fused"):  # their step counts live on the device; ours on the host
             return None
     if not isinstance(policy.observation_space, spaces.Box) or len(policy.observation_space.shape) != 1:
         return None
