@@ -404,22 +404,25 @@ def test_eager_gradients_equal_autograd(inverting_gradients):
     with th.no_grad():
         x = th.cat([obs, actions], 1).t().contiguous()
         ws = eager_steps.Workspace(fast.critic.spec.sizes, n, x)
-        folds = eager_steps.forward_train(fast.critic, ws, x, None)
-        diff = ws.outputs[-1] - q_targets.t()
-        eager_steps.backward(fast.critic, ws, x, folds, diff * weights.t() * (2.0 / n))
-        th.testing.assert_close(fast.critic.grad, critic_grad, rtol=1e-5, atol=1e-6)
+        # per-step batch statistics (mini-batches) and the input normalised once (full-batch fits)
+        for fixed in (None, eager_steps.FixedStats(x, ws.centred, fast.critic.spec.eps[0])):
+            folds = eager_steps.forward_train(fast.critic, ws, x, fixed)
+            diff = ws.outputs[-1] - q_targets.t()
+            eager_steps.backward(fast.critic, ws, x, folds, diff * weights.t() * (2.0 / n))
+            th.testing.assert_close(fast.critic.grad, critic_grad, rtol=1e-5, atol=1e-6)
         affines = fast.critic.eval_affines()
         obs_part = th.addmm(affines[0][1].unsqueeze(1), affines[0][0][:, :-3], obs.t())
         critic = eager_steps.EvalCritic(affines, fast.critic.spec.slopes, obs_part, 3, fast.critic.spec.sizes, n)
         ws = eager_steps.Workspace(fast.actor.spec.sizes, n, x)
         obs_t = obs.t().contiguous()
-        folds = eager_steps.forward_train(fast.actor, ws, obs_t, None)
-        ascent, value = critic.action_gradient(ws.outputs[-1], want_value=True)
-        assert value.item() == pytest.approx(q_values.mean().item(), rel=1e-5)
-        if inverting_gradients:
-            ascent = invert_gradients_unit_box(ascent, ws.outputs[-1])
-        eager_steps.backward(fast.actor, ws, obs_t, folds, -ascent)
-        th.testing.assert_close(fast.actor.grad, actor_grad, rtol=1e-5, atol=1e-6)
+        for fixed in (None, eager_steps.FixedStats(obs_t, ws.centred, fast.actor.spec.eps[0])):
+            folds = eager_steps.forward_train(fast.actor, ws, obs_t, fixed)
+            ascent, value = critic.action_gradient(ws.outputs[-1], want_value=True)
+            assert value.item() == pytest.approx(q_values.mean().item(), rel=1e-5)
+            if inverting_gradients:
+                ascent = invert_gradients_unit_box(ascent, ws.outputs[-1])
+            eager_steps.backward(fast.actor, ws, obs_t, folds, -ascent)
+            th.testing.assert_close(fast.actor.grad, actor_grad, rtol=1e-5, atol=1e-6)
 
 
 class OneStepFirstEpisodeEnv(TargetActionEnv):

@@ -62,28 +62,32 @@ def batch_stats(h: th.Tensor, scratch: th.Tensor, eps: float) -> tuple[th.Tensor
     return mean, var, (var + eps).rsqrt_()
 
 
-def forward_train(net, ws: Workspace, x: th.Tensor, first_stats) -> list:
+def forward_train(net, ws: Workspace, x: th.Tensor, fixed: FixedStats | None) -> list:
     """Train-mode forward of a flat ``create_bn_mlp`` network on feature-major x; outputs land in ``ws.outputs``.
 
-    ``first_stats``: precomputed (mean, var, rstd) of x for the first batch norm (fixed data over a fit) or None.
-    Returns per layer (mean, var, rstd, effective weight) for the backward pass and the running statistics.
+    ``fixed``: the first BN layer's statistics when x is the same at every step of the fit (x is then normalised once).
+    Returns per layer (mean, var, rstd, effective weight, matmul input, its transpose) for the backward pass and the
+    running statistics; rstd is None where the matmul input is the already normalised x.
     """
-    spec, h, folds = net.spec, x, []
+    spec, h, h_t, folds = net.spec, x, x.t(), []
     for i, (gamma, beta, weight, bias) in enumerate(net.views):
         if gamma is None:
-            folds.append((None, None, None, weight))
-            w_eff, b_eff = weight, bias
+            w_eff, b_col = weight, net.bias_cols[i]
+            folds.append((None, None, None, w_eff, h, h_t))
+        elif i == 0 and fixed is not None:  # BN(x) = gamma xhat + beta with xhat computed once per fit
+            w_eff = weight * gamma
+            b_col = th.addmv(bias, weight, beta).unsqueeze(1)
+            h, h_t = fixed.normalized, fixed.normalized_t
+            folds.append((fixed.mean, fixed.var, None, w_eff, h, h_t))
         else:
-            if i == 0 and first_stats is not None:
-                mean, var, rstd = first_stats
-            else:
-                mean, var, rstd = batch_stats(h, ws.centred, spec.eps[i])
+            mean, var, rstd = batch_stats(h, ws.centred, spec.eps[i])
             # BN(h) = gamma (h - mean) rstd + beta folded into the linear layer: W' = W diag(s), b' = b + W (beta - mean s)
             scale = gamma * rstd
             w_eff = weight * scale
-            b_eff = th.addmv(bias, weight, th.addcmul(beta, mean, scale, value=-1.0))
-            folds.append((mean, var, rstd, w_eff))
-        h = _activate_(th.addmm(b_eff.unsqueeze(1), w_eff, h, out=ws.outputs[i]), spec.slopes[i])
+            b_col = th.addmv(bias, weight, th.addcmul(beta, mean, scale, value=-1.0)).unsqueeze(1)
+            folds.append((mean, var, rstd, w_eff, h, h_t))
+        h = _activate_(th.addmm(b_col, w_eff, h, out=ws.outputs[i]), spec.slopes[i])
+        h_t = ws.outputs_t[i]
     return folds
 
 
@@ -94,7 +98,7 @@ def update_running_stats(net, folds: list, n: int, factors: list[float], skip_fi
     updated once at the end (:class:`FixedStats`).
     """
     j = 0
-    for layer_bn, (mean, var, _, _) in zip(net.spec.bn, folds, strict=True):
+    for layer_bn, (mean, var, *_) in zip(net.spec.bn, folds, strict=True):
         if not layer_bn:
             continue
         if not (j == 0 and skip_first):
@@ -107,17 +111,17 @@ def update_running_stats(net, folds: list, n: int, factors: list[float], skip_fi
 class FixedStats:
     """Batch statistics of the first BN layer's input when it is the same data at every step (full-batch fits).
 
-    Its running statistics follow r <- r + f_t (x - r) at every step; with x fixed that is one update with weight
-    1 - prod_t (1 - f_t), applied by :meth:`apply` after the fit (exactly x when the statistics were reset, f_1 = 1).
+    The input is normalised once (``normalized``). Its running statistics follow r <- r + f_t (x - r) at every step;
+    with x fixed that is one update with weight 1 - prod_t (1 - f_t), applied by :meth:`apply` after the fit (exactly x
+    when the statistics were reset, f_1 = 1).
     """
 
     def __init__(self, x: th.Tensor, scratch: th.Tensor, eps: float):
-        self.mean, self.var, self.rstd = batch_stats(x, scratch, eps)
+        self.mean, self.var, rstd = batch_stats(x, scratch, eps)
+        self.normalized = (x - self.mean.unsqueeze(1)).mul_(rstd.unsqueeze(1))  # xhat, once per fit
+        self.normalized_t = self.normalized.t()
         self.n = x.shape[1]
         self.keep = 1.0
-
-    def as_first(self) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-        return self.mean, self.var, self.rstd
 
     def step(self, factor: float) -> None:
         self.keep *= 1.0 - factor
@@ -137,15 +141,15 @@ def backward(net, ws: Workspace, x: th.Tensor, folds: list, grad_out: th.Tensor)
     for i in range(len(net.views) - 1, -1, -1):
         gamma, beta, weight, _ = net.views[i]
         g_gamma, g_beta, g_weight, g_bias = net.grad_views[i]
-        mean, _, rstd, w_eff = folds[i]
-        h = x if i == 0 else ws.outputs[i - 1]
-        h_t = x.t() if i == 0 else ws.outputs_t[i - 1]
+        mean, _, rstd, w_eff, h, h_t = folds[i]
         th.sum(dz, 1, out=g_bias)
         if gamma is None:
             th.mm(dz, h_t, out=g_weight)
             dx = th.mm(net.weights_t[i], dz, out=ws.input_grads[i]) if i > 0 else None
         else:
-            t = th.mm(dz, h_t).addr_(g_bias, mean, alpha=-1.0).mul_(rstd)  # sum_n dz xhat^T
+            t = th.mm(dz, h_t)  # sum_n dz xhat^T (h = xhat already normalised when rstd is None)
+            if rstd is not None:
+                t.addr_(g_bias, mean, alpha=-1.0).mul_(rstd)
             th.mul(t, gamma, out=g_weight).addr_(g_bias, beta)
             th.mv(net.weights_t[i], g_bias, out=g_beta)  # sum_n dL/dBN(h)
             th.sum(weight * t, 0, out=g_gamma)  # sum_n dL/dBN(h) xhat
@@ -192,7 +196,7 @@ def critic_step(net, ws: Workspace, x, fixed: FixedStats | None, q_targets, scal
     Returns the loss before the step if ``want_loss`` (only the last step's is logged), else None.
     """
     factors = net.advance()
-    folds = forward_train(net, ws, x, None if fixed is None else fixed.as_first())
+    folds = forward_train(net, ws, x, fixed)
     update_running_stats(net, folds, x.shape[1], factors, skip_first=fixed is not None)
     if fixed is not None:
         fixed.step(factors[0])
@@ -218,6 +222,8 @@ class EvalCritic:
         # d mean_n Q / d (last hidden output) = w_last / N for every sample: a broadcast view, made once
         self.dq_dh_last = (w_last[0] / n).unsqueeze(1).expand(w_last.shape[1], n)
         self.w_last, self.b_last = w_last, b_last
+        self.weights_t = [weight.t() for weight, _ in affines]  # views, made once
+        self.bias_cols = [bias.unsqueeze(1) for _, bias in affines]
 
     def subset(self, idx: th.Tensor) -> EvalCritic:
         """The same critic on the mini-batch ``idx``."""
@@ -232,24 +238,25 @@ class EvalCritic:
         if n_layers == 1:  # linear critic
             value = self.obs_part.mean() + th.dot(self.w_act[0], pi.mean(1)) if want_value else None
             return self.grad.copy_((self.w_act_t / pi.shape[1]).expand_as(pi)), value
+        last = n_layers - 2  # the last hidden layer: its activation only matters for the value, its mask for d/dpi
         h = ws.outputs[0]
         if pi.shape[0] == 1:  # a rank-1 update: one pass instead of addmm's two
             th.addcmul(self.obs_part, self.w_act, pi, out=h)
         else:
             th.addmm(self.obs_part, self.w_act, pi, out=h)
-        _activate_(h, slopes[0])
-        for i in range(1, n_layers - 1):
-            weight, bias = affines[i]
-            h = _activate_(th.addmm(bias.unsqueeze(1), weight, h, out=ws.outputs[i]), slopes[i])
+        for i in range(last + 1):
+            if i > 0:
+                h = th.addmm(self.bias_cols[i], affines[i][0], h, out=ws.outputs[i])
+            if i < last or want_value:
+                _activate_(h, slopes[i])
         value = th.addmv(self.b_last, self.w_last, h.mean(1))[0] if want_value else None
-        last = n_layers - 2
         dz = ws.input_grads[last + 1]
         if slopes[last] is None:
             dz.copy_(self.dq_dh_last)
-        else:
-            th.ops.aten.leaky_relu_backward.grad_input(self.dq_dh_last, h, slopes[last], True, grad_input=dz)
+        else:  # the leaky-ReLU mask from the output (activated) or the pre-activation: the same signs
+            th.ops.aten.leaky_relu_backward.grad_input(self.dq_dh_last, h, slopes[last], want_value, grad_input=dz)
         for i in range(last, 0, -1):
-            dh = th.mm(affines[i][0].t(), dz, out=ws.input_grads[i])
+            dh = th.mm(self.weights_t[i], dz, out=ws.input_grads[i])
             dz = _activation_backward_(dh, ws.outputs[i - 1], slopes[i - 1])
         return th.mm(self.w_act_t, dz, out=self.grad), value
 
@@ -262,7 +269,7 @@ def actor_step(
     Returns the objective before the step if ``want_objective``, else None.
     """
     factors = net.advance()
-    folds = forward_train(net, ws, obs, None if fixed is None else fixed.as_first())
+    folds = forward_train(net, ws, obs, fixed)
     update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
     if fixed is not None:
         fixed.step(factors[0])

@@ -116,6 +116,7 @@ class _FlatNet:
         self.lr, self.betas, self.eps = float(group["lr"]), tuple(group["betas"]), float(group["eps"])
         self.views = self.spec.unpack(self.flat)
         self.weights_t = [weight.t() for _, _, weight, _ in self.views]
+        self.bias_cols = [bias.unsqueeze(1) for _, _, _, bias in self.views]
         self.grad = th.zeros_like(self.flat)
         self.grad_views = self.spec.unpack(self.grad)
         self.exp_avg, self.exp_avg_sq = th.zeros_like(self.flat), th.zeros_like(self.flat)
