@@ -173,7 +173,7 @@ class _FlatNet:
     def eval_affines(self) -> list[tuple[th.Tensor, th.Tensor]]:
         """Eval-mode (running statistics) weight and bias of every linear layer, BN folded in."""
         out = []
-        for layer, (gamma, beta, weight, bias) in zip(self.layers, self.spec.unpack(self.flat), strict=True):
+        for layer, (gamma, beta, weight, bias) in zip(self.layers, self.views, strict=True):
             if layer.bn is None:
                 out.append((weight, bias))
             else:
@@ -231,7 +231,8 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
 
 
 class FastUpdate:
-    """Critic fit and actor fit of one DENFAC update with the step functions above (eager or compiled)."""
+    """Critic fit, actor fit and eval-mode networks of one DENFAC update, with the eager steps (``eager_steps.py``)
+    or, for the sample count ``compiled_size``, the compiled ones (``compiled_steps.py``)."""
 
     def __init__(
         self,
@@ -289,7 +290,7 @@ class FastUpdate:
         n = self._sample_count(n_full)
         if self._compiled(n):
             return self._fit_critic_compiled(inputs, q_t, c_t, steps, max_grad_norm, batch_indices)
-        # Eager: the first layer's BN statistics of the fixed data are computed once per fit (full batch).
+        # Eager. Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
         ws = eager_steps.Workspace(net.spec.sizes, n, inputs)
         fixed = eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
         scaled_full = c_t * (2.0 / n_full)
@@ -325,13 +326,12 @@ class FastUpdate:
         action_dim = net.spec.sizes[-1]
         critic_affines = self.critic.eval_affines()
         w_first, b_first = critic_affines[0]
-        w_act = w_first[:, -action_dim:].contiguous()
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         n_full = obs_t.shape[1]
         n = self._sample_count(n_full)
         if self._compiled(n):
             return self._fit_actor_compiled(
-                obs_t, critic_affines, w_act, obs_part_full, steps, max_grad_norm, inverting, batch_indices
+                obs_t, critic_affines, obs_part_full, steps, max_grad_norm, inverting, batch_indices
             )
         ws = eager_steps.Workspace(net.spec.sizes, n, obs_t)
         fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
@@ -348,8 +348,9 @@ class FastUpdate:
         net.finish_fit(fixed)
         return objective  # type: ignore[return-value]
 
-    def _fit_actor_compiled(self, obs_t, critic_affines, w_act, obs_part_full, steps, max_grad_norm, inverting, batch_indices):
+    def _fit_actor_compiled(self, obs_t, critic_affines, obs_part_full, steps, max_grad_norm, inverting, batch_indices):
         net = self.actor
+        w_act = critic_affines[0][0][:, -net.spec.sizes[-1] :].contiguous()  # the critic's action columns
         objective = th.zeros((), device=obs_t.device)
         running = net.running()
         for _ in range(steps):
