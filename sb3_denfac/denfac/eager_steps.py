@@ -1,6 +1,6 @@
 """Eager critic and actor steps of DENFAC's fast update (``update_path="fast"``, the default): few ops, no allocations.
 
-At the paper's sizes (D = 6000 samples, critic 50-7) a critic step is ~75 tensor ops and an actor step ~40, around a
+At the paper's sizes (D = 6000 samples, critic 50-7) a critic step is ~70 tensor ops and an actor step ~35, around a
 handful of matmuls over (50, N) activations, so two costs dominate: per-op dispatch (~2 us each, 350 steps per
 update) and passes over the activations. These functions therefore
 
