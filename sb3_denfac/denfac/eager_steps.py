@@ -47,7 +47,6 @@ class Workspace:
         def empty(rows: int) -> th.Tensor:
             return th.empty((rows, n), dtype=like.dtype, device=like.device)
 
-        self.n = n
         self.outputs = [empty(d) for d in sizes[1:]]  # post-activation output of every layer
         self.outputs_t = [out.t() for out in self.outputs]  # views, made once
         self.input_grads = [empty(d) for d in sizes[:-1]]  # d loss / d (input of layer i), i >= 1 used
