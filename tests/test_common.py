@@ -16,6 +16,7 @@ from sb3_denfac.common.inverting_gradients import (
 from sb3_denfac.common.networks import create_bn_mlp, flat_parameters, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import (
     clamp_mean,
+    importance_weight_floor,
     sample_truncated_normal,
     truncated_importance_weights,
     truncated_normal_log_prob,
@@ -81,6 +82,20 @@ def test_importance_weights_are_truncated_ratios(lp_t, lp_b):
     w = truncated_importance_weights(th.tensor([lp_t], dtype=th.float64), th.tensor([lp_b], dtype=th.float64)).item()
     assert 0.0 <= w <= 1.0
     assert w == pytest.approx(min(1.0, np.exp(lp_t - lp_b)), rel=1e-9, abs=1e-300)
+
+
+@settings(max_examples=60, deadline=None)
+@given(log_ratio=st.floats(-200, 0))
+def test_importance_weights_below_the_floor_are_exactly_zero(log_ratio):
+    """float32 weights are the ratio, or exactly 0 below sqrt(tiny): never a subnormal number."""
+    w = truncated_importance_weights(th.tensor([log_ratio]), th.tensor([0.0])).item()
+    floor = importance_weight_floor(th.float32)
+    tiny = float(th.finfo(th.float32).tiny)
+    assert w == 0.0 or w >= tiny
+    if np.exp(log_ratio) < floor * 0.999:
+        assert w == 0.0
+    elif np.exp(log_ratio) > floor * 1.001:
+        assert w == pytest.approx(np.exp(log_ratio), rel=1e-5)
 
 
 @settings(max_examples=80, deadline=None)
