@@ -19,9 +19,9 @@ TINY = float(th.finfo(th.float32).tiny)
 
 
 class SubnormalCounter(TorchDispatchMode):
-    """Counts the ops whose computed float32 results (outputs, or arguments they write) hold subnormal numbers.
-
-    Views and ``empty`` allocations are not computations (their memory may hold anything) and are skipped."""
+    """Counts the ops that read or compute float32 subnormal numbers: any tensor among an op's arguments (read, or
+    written in place) or results, checked after the op. Views and ``empty`` allocations are no arithmetic (their
+    memory may hold anything until written) and are skipped."""
 
     def __init__(self):
         super().__init__()
@@ -32,11 +32,7 @@ class SubnormalCounter(TorchDispatchMode):
         out = func(*args, **kwargs)
         if func.is_view or "empty" in func.__name__:
             return out
-        written = [out]
-        for arg, value in zip(func._schema.arguments, [*args, *kwargs.values()], strict=False):
-            if arg.alias_info is not None and arg.alias_info.is_write:
-                written.append(value)
-        for tensor in tree_flatten(written)[0]:
+        for tensor in tree_flatten((args, kwargs, out))[0]:
             if isinstance(tensor, th.Tensor) and tensor.dtype == th.float32 and tensor.numel():
                 magnitude = tensor.detach().abs()
                 if bool(((magnitude > 0) & (magnitude < TINY)).any()):

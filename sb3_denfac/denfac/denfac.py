@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -14,20 +15,19 @@ from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import update_learning_rate
-from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
-from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer
-from sb3_denfac.denfac.fast import FastUpdate, supported_networks
+from sb3_denfac.denfac.fast import FastUpdater, supported_networks
 from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
 WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
-UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
+UPDATE_PATHS = ("auto", "fast", "plain")
 
 
 class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
@@ -88,13 +88,12 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     :param adam_eps: Adam epsilon (authors: 1e-8)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
-    :param update_path: "auto" (default: "fast" when the policy allows it, else "plain"), "fast" (hand-written
-        flat-parameter steps with preallocated buffers and fused Adam, eager: about 5x faster than a straightforward
-        autograd update at the paper's Acrobot sizes on one CPU thread, see ``benchmarks/results/update_cost.md``),
-        "compiled" (``torch.compile``d steps for the sample count that repeats: the full buffer, or the mini-batch
-        size; the first such update of a process pays the compilation, seconds to a minute; on CPU measured no faster
-        than "fast") or "plain" (autograd on the
-        modules). All compute the same update up to float rounding; see ``fast.py``.
+    :param update_path: which :class:`~sb3_denfac.denfac.updaters.Updater` carries out Algorithm 1: "auto" (default:
+        "fast" when the policy allows it, else "plain"), "fast" (:class:`~sb3_denfac.denfac.fast.FastUpdater`:
+        hand-written steps on flat parameters with preallocated buffers and fused Adam; needs vector observations, the
+        default MLP networks and Adam) or "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`: autograd on
+        the modules, any policy). Both compute the same update up to float rounding; their cost is measured in
+        ``benchmarks/results/update_cost.md``. Models saved with the removed "compiled" path load with "fast".
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -153,6 +152,10 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             ("critic_learning_rate", critic_learning_rate),
         ):
             check_learning_rate(name, rate)
+        if update_path == "compiled":
+            raise ValueError(
+                "update_path='compiled' was removed in sb3-denfac 0.2 (measured no faster than 'fast' on CPU): use 'fast'"
+            )
         if update_path not in UPDATE_PATHS:
             raise ValueError(f"update_path must be one of {UPDATE_PATHS}, got {update_path!r}")
         super().__init__(
@@ -238,6 +241,9 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             )
 
     def _setup_model(self) -> None:
+        if self.update_path == "compiled":  # a model saved by sb3-denfac 0.1
+            warnings.warn("update_path='compiled' was removed in sb3-denfac 0.2: this model now updates with 'fast'")
+            self.update_path = "fast"
         if self.replay_buffer_class is None:
             self.replay_buffer_class = DENFACReplayBuffer
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
@@ -283,62 +289,6 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
-    def _batch_indices(self, n: int) -> th.Tensor | None:
-        if self.batch_size is None or self.batch_size >= n:
-            return None
-        return th.randperm(n, device=self.device)[: self.batch_size]
-
-    def _fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
-        critic, optimizer = self.critic, self.critic.optimizer
-        critic.set_training_mode(True)
-        loss = th.zeros(())
-        for _ in range(self.critic_steps):
-            idx = self._batch_indices(obs.shape[0])
-            o, a, q, c = (
-                (obs, actions, q_targets, weights) if idx is None else (obs[idx], actions[idx], q_targets[idx], weights[idx])
-            )
-            loss = (c * (critic(o, a) - q).pow(2)).mean()
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if self.max_grad_norm is not None:
-                clip_grad_norm_(critic.parameters(), self.max_grad_norm)
-            optimizer.step()
-        critic.set_training_mode(False)
-        return loss.detach()
-
-    def _fit_actor(self, obs: th.Tensor) -> th.Tensor:
-        actor, critic, optimizer = self.actor, self.critic, self.actor.optimizer
-        actor.set_training_mode(True)
-        critic.set_training_mode(False)  # ascend the fitted Q without touching its running statistics
-        critic.requires_grad_(False)
-        objective = th.zeros(())
-        low, high = th.full((1,), -1.0, device=self.device), th.full((1,), 1.0, device=self.device)
-        for _ in range(self.actor_steps):
-            idx = self._batch_indices(obs.shape[0])
-            o = obs if idx is None else obs[idx]
-            optimizer.zero_grad(set_to_none=True)
-            pi = actor(o)
-            q = critic(o, pi)
-            if self.inverting_gradients:
-                objective = inverting_gradient_actor_backward(q, pi, low, high)
-            else:
-                (-q.mean()).backward()
-                objective = q.detach().mean()
-            if self.max_grad_norm is not None:
-                clip_grad_norm_(actor.parameters(), self.max_grad_norm)
-            optimizer.step()
-        critic.requires_grad_(True)
-        actor.set_training_mode(False)
-        return objective.detach()
-
-    def _reset_bn_statistics(self, net: th.nn.Module, fast_net=None) -> None:
-        if self.policy.bn_momentum is None:  # cumulative average: statistics of this fit only
-            for layer in net.modules():
-                if isinstance(layer, th.nn.modules.batchnorm._BatchNorm):
-                    layer.reset_running_stats()
-            if fast_net is not None:
-                fast_net.reset_bn_counts()
-
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
         """Algorithm 1 over the whole replay buffer, ``gradient_steps`` times (DENFAC calls it once per episode)."""
         for net, rate in ((self.actor, self.actor_learning_rate), (self.critic, self.critic_learning_rate)):
@@ -350,20 +300,24 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         for _ in range(gradient_steps):
             self._update()
 
-    def _fast_update(self) -> FastUpdate | None:
+    def _make_updater(self) -> Updater:
+        """The updater that carries out this update (``update_path``; see :mod:`~sb3_denfac.denfac.updaters`)."""
+        settings = FitSettings(
+            critic_steps=self.critic_steps,
+            actor_steps=self.actor_steps,
+            max_grad_norm=self.max_grad_norm,
+            inverting_gradients=self.inverting_gradients,
+            batch_size=self.batch_size,
+            fresh_bn_statistics=self.policy.bn_momentum is None,
+        )
         if self.update_path == "plain":
-            return None
+            return AutogradUpdater(self.policy, settings)
         layers = supported_networks(self.policy)
         if layers is None:
-            if self.update_path in ("fast", "compiled"):
-                raise ValueError(
-                    f"update_path={self.update_path!r} needs vector observations, the default MLP networks and Adam"
-                )
-            return None
-        compiled_size = None
-        if self.update_path == "compiled":  # the sample count that repeats: full buffer or mini-batch
-            compiled_size = self.replay_buffer.buffer_size if self.batch_size is None else self.batch_size
-        return FastUpdate(self.policy, *layers, batch_size=self.batch_size, compiled_size=compiled_size)
+            if self.update_path == "fast":
+                raise ValueError("update_path='fast' needs vector observations, the default MLP networks and Adam")
+            return AutogradUpdater(self.policy, settings)
+        return FastUpdater(self.policy, settings, *layers)
 
     def _update(self) -> None:
         """One end-of-episode update: Algorithm 1 with K fitted iterations over the whole buffer D."""
@@ -372,48 +326,21 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
-        low, high = th.full_like(actions, -1.0), th.full_like(actions, 1.0)
-        self.policy.set_training_mode(False)
-        fast = self._fast_update()
-        # pi(s) and Q(s, a) in eval mode: the modules, or the same networks through the fast path's flat parameters
-        actor, critic = (self.actor, self.critic) if fast is None else (fast.actor_eval, fast.critic_eval)
+        updater = self._make_updater()
         critic_loss = actor_objective = th.zeros(())
         for _ in range(self.n_fitted_iterations):
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_actions = actor(next_obs).clamp(-1.0, 1.0)
-                q_targets = rewards + self.gamma * (1.0 - terminal) * critic(next_obs, next_actions)
-                if self.weighting == "none":
-                    weights = th.ones_like(rewards)
-                else:
-                    weight_obs = next_obs if self.weighting == "retrace_next_state_quirk" else obs
-                    log_prob_target = self._target_log_prob(actions, actor(weight_obs), low, high)
-                    weights = truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
+                next_actions = updater.actor(next_obs).clamp(-1.0, 1.0)
+                q_targets = rewards + self.gamma * (1.0 - terminal) * updater.critic(next_obs, next_actions)
+                weights = self._importance_weights(updater, obs, next_obs, actions, log_prob_b)
             if self.reset_critic:
-                self.policy.reset_critic()
-                if fast is not None:
-                    fast.critic.reset()
-            self._reset_bn_statistics(self.critic, None if fast is None else fast.critic)
-            if fast is None:
-                critic_loss = self._fit_critic(obs, actions, q_targets, weights)
-            else:
-                critic_loss = fast.fit_critic(
-                    obs, actions, q_targets, weights, self.critic_steps, self.max_grad_norm, self._batch_indices
-                )
+                updater.reset_critic()
+            critic_loss = updater.fit_critic(obs, actions, q_targets, weights)
             if self.reset_actor:
-                self.policy.reset_actor()
-                if fast is not None:
-                    fast.actor.reset()
-            self._reset_bn_statistics(self.actor, None if fast is None else fast.actor)
-            if self.actor_steps > 0:
-                if fast is None:
-                    actor_objective = self._fit_actor(obs)
-                else:
-                    actor_objective = fast.fit_actor(
-                        obs, self.actor_steps, self.max_grad_norm, self.inverting_gradients, self._batch_indices
-                    )
-        if fast is not None:
-            fast.write_back()
+                updater.reset_actor()
+            actor_objective = updater.fit_actor(obs)
+        updater.finish()
         self._n_updates += 1
         self._last_update_stats = dict(weights=weights, q_targets=q_targets)
         self.logger.record("train/critic_loss", float(critic_loss))
@@ -425,8 +352,16 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         self.logger.record("train/buffer_size", obs.shape[0])
         self.logger.record("train/n_updates", self._n_updates)
 
-    def _target_log_prob(self, actions: th.Tensor, means: th.Tensor, low: th.Tensor, high: th.Tensor) -> th.Tensor:
-        return truncated_normal_log_prob(actions, means, self.sigma, low, high)  # type: ignore[arg-type]
+    def _importance_weights(
+        self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor
+    ) -> th.Tensor:
+        """c_t = min(1, pi_{k-1}(a_t|s_t) / pi_b(a_t|s_t)) (``weighting``), shape (N, 1)."""
+        if self.weighting == "none":
+            return th.ones_like(log_prob_b).unsqueeze(1)
+        weight_obs = next_obs if self.weighting == "retrace_next_state_quirk" else obs
+        low, high = th.full_like(actions, -1.0), th.full_like(actions, 1.0)
+        log_prob_target = truncated_normal_log_prob(actions, updater.actor(weight_obs), self.sigma, low, high)
+        return truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
 
     # ----- SB3 plumbing --------------------------------------------------------------------------------------------
     def learn(

@@ -1,4 +1,4 @@
-"""Eager critic and actor steps of DENFAC's fast update (``update_path="fast"``, the default): few ops, no allocations.
+"""Critic and actor steps of DENFAC's fast updater (``fast.py``): few ops, no per-step allocations.
 
 At the paper's sizes (D = 6000 samples, critic 50-7) a critic step is ~70 tensor ops and an actor step ~35, around a
 handful of matmuls over (50, N) activations, so two costs dominate: per-op dispatch (~2 us each, 350 steps per
@@ -10,14 +10,18 @@ update) and passes over the activations. These functions therefore
   gathered batch;
 - write gradients straight into views of one flat gradient tensor, and step Adam with PyTorch's fused Adam kernel
   (``torch._fused_adam_``, the kernel behind ``Adam(fused=True)``): one op instead of a dozen;
+- use ``aten.leaky_relu_backward`` for the activations' backward in place.
+
+The two kernels are private PyTorch APIs: where a torch version lacks one, the same arithmetic runs with public ops
+(:data:`FUSED_ADAM`, :data:`LEAKY_RELU_BACKWARD`; tested by switching them off).
 - skip what the algorithm never reads: the loss of every critic step but the last, the objective of every actor step
   but the last, the input gradient of the first layer;
-- fold batch norm into the following linear layer (``W diag(gamma rstd)``, shifted bias) as the compiled steps do
-  (see ``fast.py``), so normalised activations are never written.
+- fold batch norm into the following linear layer (``W diag(gamma rstd)``, shifted bias), so normalised activations
+  are never written.
 
-The arithmetic is the plain path's (autograd on the modules, ``clip_grad_norm_``, ``torch.optim.Adam``) up to float
-rounding. ``tests/test_denfac.py`` checks the gradients against autograd, whole updates against the plain path, that
-no per-step allocation happens, and that nothing assumes the CPU (a run on the "meta" device).
+The arithmetic is the autograd updater's (``clip_grad_norm_``, ``torch.optim.Adam``) up to float rounding. The tests
+check the gradients against autograd, whole updates against the autograd updater, that no per-step allocation
+happens, and that nothing assumes the CPU (a run on the "meta" device).
 """
 
 from __future__ import annotations
@@ -26,6 +30,19 @@ import torch as th
 from torch.nn import functional as F  # noqa: N812
 
 from sb3_denfac.common.inverting_gradients import invert_gradients_unit_box
+
+#: Whether this torch has the private fused Adam kernel (else: the same Adam step with public ops).
+FUSED_ADAM = hasattr(th, "_fused_adam_")
+#: Whether this torch has the private ``aten.leaky_relu_backward`` op (else: a multiply by the slope mask).
+LEAKY_RELU_BACKWARD = hasattr(th.ops.aten, "leaky_relu_backward")
+
+
+def leaky_relu_backward(grad: th.Tensor, activation: th.Tensor, slope: float, out: th.Tensor) -> th.Tensor:
+    """``out`` <- ``grad`` * (1 where ``activation`` > 0 else ``slope``); ``activation`` may be the leaky ReLU's
+    input or its output (same signs for a positive slope). ``out`` may be ``grad``."""
+    if LEAKY_RELU_BACKWARD:
+        return th.ops.aten.leaky_relu_backward.grad_input(grad, activation, slope, True, grad_input=out)
+    return th.mul(grad, th.where(activation > 0, 1.0, slope), out=out)
 
 
 def _activate_(h: th.Tensor, slope: float | None) -> th.Tensor:
@@ -37,7 +54,7 @@ def _activation_backward_(grad: th.Tensor, out: th.Tensor, slope: float | None) 
     """In place: ``grad`` <- d leaky_relu / d input * ``grad``, from the activation's output ``out``."""
     if slope is None:
         return grad
-    return th.ops.aten.leaky_relu_backward.grad_input(grad, out, slope, True, grad_input=grad)
+    return leaky_relu_backward(grad, out, slope, out=grad)
 
 
 class Workspace:
@@ -165,11 +182,14 @@ def backward(net, ws: Workspace, x: th.Tensor, folds: list, grad_out: th.Tensor)
 
 
 def adam_step(net, max_grad_norm: float | None) -> None:
-    """clip_grad_norm_ then one torch Adam step on the flat parameters, with PyTorch's fused Adam kernel."""
+    """clip_grad_norm_ then one torch Adam step on the flat parameters (PyTorch's fused Adam kernel if available)."""
     grad = net.grad
     scale = None
-    if max_grad_norm is not None:  # fused Adam divides the gradient by grad_scale: 1 / clip_grad_norm_'s factor
+    if max_grad_norm is not None:  # the clipping factor is 1 / scale: clip_grad_norm_'s max_norm / (norm + 1e-6), <= 1
         scale = ((th.linalg.vector_norm(grad) + 1e-6) / max_grad_norm).clamp_(min=1.0)
+    if not FUSED_ADAM:
+        _adam_step_public(net, grad if scale is None else grad / scale)
+        return
     net.step_tensor.fill_(net.step_count)
     th._fused_adam_(
         [net.flat],
@@ -187,6 +207,16 @@ def adam_step(net, max_grad_norm: float | None) -> None:
         maximize=False,
         grad_scale=scale,
     )
+
+
+def _adam_step_public(net, grad: th.Tensor) -> None:
+    """``torch.optim.Adam``'s step (no weight decay, no amsgrad) with public ops; ``net.step_count`` is the step t."""
+    beta1, beta2 = net.betas
+    t = net.step_count
+    net.exp_avg.lerp_(grad, 1.0 - beta1)
+    net.exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1.0 - beta2)
+    denom = (net.exp_avg_sq.sqrt() / (1.0 - beta2**t) ** 0.5).add_(net.eps)
+    net.flat.addcdiv_(net.exp_avg, denom, value=-net.lr / (1.0 - beta1**t))
 
 
 def critic_step(net, ws: Workspace, x, fixed: FixedStats | None, q_targets, scaled_weights, max_grad_norm, want_loss: bool):
@@ -253,7 +283,7 @@ class EvalCritic:
         if slopes[last] is None:
             dz.copy_(self.dq_dh_last)
         else:  # the leaky-ReLU mask from the output (activated) or the pre-activation: the same signs
-            th.ops.aten.leaky_relu_backward.grad_input(self.dq_dh_last, h, slopes[last], want_value, grad_input=dz)
+            leaky_relu_backward(self.dq_dh_last, h, slopes[last], out=dz)
         for i in range(last, 0, -1):
             dh = th.mm(self.weights_t[i], dz, out=ws.input_grads[i])
             dz = _activation_backward_(dh, ws.outputs[i - 1], slopes[i - 1])

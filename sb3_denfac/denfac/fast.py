@@ -1,37 +1,33 @@
-"""Fast paths of DENFAC's end-of-episode update (issue 7): the plain autograd path's arithmetic, fewer ops.
+"""The fast updater of DENFAC's end-of-episode update: the autograd updater's arithmetic in far fewer ops.
 
 The update fits tiny networks (e.g. 5-50-7-1) on a few thousand samples hundreds of times, so per-op dispatch and
-memory passes over the activations dominate, not FLOPs. Common to both fast paths (this file):
+memory passes over the activations dominate, not FLOPs. The :class:`FastUpdater`
 
-- parameters live in one flat tensor (the module's parameters become views of it, so in-place resets write into it),
-  with flat Adam moments and gradients: clipping and Adam are a few ops per step, not a few per parameter tensor;
-- activations are feature-major (features, N): the long sample axis is the matmuls' inner/outer dimension and the
-  per-feature batch-norm reductions are contiguous;
-- batch norm is folded into the following linear layer (``W diag(gamma rstd)``, shifted bias); its backward reuses
-  the weight-gradient matmul's reductions; the backward is written by hand (no autograd graph);
-- the critic's first layer in eval mode is split into an observation part, computed once per actor fit, and an action
+- keeps each network's parameters in one flat tensor (the module's parameters become views of it, so in-place resets
+  write into it), with flat Adam moments and gradients: clipping and Adam are a few ops per step, not a few per
+  parameter tensor;
+- lays activations out feature-major (features, N): the long sample axis is the matmuls' inner/outer dimension and
+  the per-feature batch-norm reductions are contiguous;
+- folds batch norm into the following linear layer (``W diag(gamma rstd)``, shifted bias) and writes the backward pass
+  by hand (no autograd graph), with the steps of :mod:`~sb3_denfac.denfac.eager_steps`;
+- splits the critic's first layer in eval mode into an observation part, computed once per actor fit, and an action
   part for the G actor steps; targets and importance weights use the same eval-mode flat networks.
 
-``update_path="fast"`` (default) runs :mod:`~sb3_denfac.denfac.eager_steps` (preallocated buffers, in-place ops,
-fused Adam); ``"compiled"`` runs :mod:`~sb3_denfac.denfac.compiled_steps` through ``torch.compile`` for the sample
-count that repeats (the full buffer, or the mini-batch size) and the eager steps while the buffer fills.
-
 Running statistics, Adam moments and step counts follow PyTorch's ``BatchNorm1d`` and ``Adam`` (up to float
-rounding), so fast and plain paths give the same result for the same seed (tested). Everything stays on the networks'
-device and the steps never wait for it: per-step scalars go host -> device, and the only reads back are the logged
-losses at the end of an update and, with a set ``bn_momentum`` (no reset of the statistics), ``num_batches_tracked``
-once per update.
+rounding), so both updaters give the same result for the same seed (tested). Everything stays on the networks'
+device and the steps never wait for it: the only reads back are the logged losses at the end of an update and, with
+a set ``bn_momentum`` (no reset of the statistics), ``num_batches_tracked`` once per update.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch as th
 from torch import nn
 
-from sb3_denfac.denfac import compiled_steps, eager_steps
+from sb3_denfac.denfac import eager_steps
+from sb3_denfac.denfac.updaters import FitSettings, Updater
 
 
 @dataclass
@@ -66,7 +62,7 @@ def parse_bn_mlp(net: nn.Module) -> list[_Layer] | None:
 
 @dataclass(frozen=True)
 class _Spec:
-    """Static description of a ``create_bn_mlp`` network for the step functions (hashable: compile-cache key)."""
+    """Static description of a ``create_bn_mlp`` network for the step functions."""
 
     sizes: tuple[int, ...]  # in, hidden..., out
     bn: tuple[bool, ...]  # per linear layer: batch norm before it
@@ -150,14 +146,6 @@ class _FlatNet:
             factors.append(bn.momentum if bn.momentum is not None else 1.0 / self.bn_counts[j])
         return factors
 
-    def step_scalars(self) -> th.Tensor:
-        """:meth:`advance`, as one tensor [lr / (1 - beta1^t), sqrt(1 - beta2^t), BN factors...] for the compiled
-        steps (values change every step: tensors avoid recompilation)."""
-        factors = self.advance()
-        t = self.step_count
-        values = [self.lr / (1 - self.betas[0] ** t), math.sqrt(1 - self.betas[1] ** t), *factors]
-        return th.tensor(values, dtype=self.flat.dtype, device=self.flat.device)
-
     def finish_fit(self, fixed) -> None:
         """After an eager fit: the first BN layer's deferred running update, and the host BN counts written into
         ``num_batches_tracked`` (the eager steps count on the host only)."""
@@ -165,9 +153,6 @@ class _FlatNet:
             fixed.apply(self.bn_layers[0])
         for bn, count in zip(self.bn_layers, self.bn_counts or [], strict=False):
             bn.num_batches_tracked.fill_(count)  # type: ignore[union-attr]
-
-    def running(self) -> list[tuple[th.Tensor, th.Tensor, th.Tensor]]:
-        return [(bn.running_mean, bn.running_var, bn.num_batches_tracked) for bn in self.bn_layers]  # type: ignore[misc]
 
     @th.no_grad()
     def eval_affines(self) -> list[tuple[th.Tensor, th.Tensor]]:
@@ -212,7 +197,7 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
     for net in (policy.actor, policy.critic):
-        if not isinstance(net.features_extractor, FlattenExtractor):
+        if not isinstance(getattr(net, "features_extractor", None), FlattenExtractor):
             return None
         opt = net.optimizer
         group = opt.param_groups[0]
@@ -230,135 +215,95 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
     return actor_layers, critic_layers
 
 
-class FastUpdate:
-    """Critic fit, actor fit and eval-mode networks of one DENFAC update, with the eager steps (``eager_steps.py``)
-    or, for the sample count ``compiled_size``, the compiled ones (``compiled_steps.py``)."""
+class FastUpdater(Updater):
+    """The :class:`~sb3_denfac.denfac.updaters.Updater` on flat parameters with the eager steps of ``eager_steps.py``.
 
-    def __init__(
-        self,
-        policy,
-        actor_layers: list[_Layer],
-        critic_layers: list[_Layer],
-        batch_size: int | None = None,
-        compiled_size: int | None = None,
-    ):
-        """``batch_size``: mini-batch size (None: full batch); ``compiled_size``: sample count N whose steps run
-        compiled (None: all eager)."""
-        self.batch_size = batch_size
-        self.actor = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
-        self.critic = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
-        self.compiled_size = compiled_size
+    Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`.
+    """
 
-    def _sample_count(self, n_full: int) -> int:
-        """Samples per step: the whole buffer, or the mini-batch (as ``DENFAC._batch_indices`` draws it)."""
-        return n_full if self.batch_size is None or self.batch_size >= n_full else self.batch_size
+    def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer], critic_layers: list[_Layer]):
+        super().__init__(policy, settings)
+        self.actor_net = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
+        self.critic_net = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
 
-    def _compiled(self, n: int) -> bool:
-        """Whether steps over ``n`` samples run compiled."""
-        return n == self.compiled_size
+    def reset_critic(self) -> None:
+        super().reset_critic()
+        self.critic_net.reset()
 
-    def write_back(self) -> None:
-        self.actor.write_back()
-        self.critic.write_back()
+    def reset_actor(self) -> None:
+        super().reset_actor()
+        self.actor_net.reset()
+
+    def finish(self) -> None:
+        self.actor_net.write_back()
+        self.critic_net.write_back()
 
     @th.no_grad()
-    def actor_eval(self, obs: th.Tensor) -> th.Tensor:
+    def actor(self, obs: th.Tensor) -> th.Tensor:
         """pi(s) in eval mode (running statistics), (N, A) like ``policy.actor(obs)``, from the flat parameters."""
-        return self.actor.eval_forward(obs.float().t()).t()
+        return self.actor_net.eval_forward(obs.float().t()).t()
 
     @th.no_grad()
-    def critic_eval(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+    def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q(s, a) in eval mode, (N, 1) like ``policy.critic(obs, actions)``."""
-        return self.critic.eval_forward(th.cat([obs.float(), actions], dim=1).t()).t()
+        return self.critic_net.eval_forward(th.cat([obs.float(), actions], dim=1).t()).t()
 
     @th.no_grad()
-    def fit_critic(
-        self,
-        obs: th.Tensor,
-        actions: th.Tensor,
-        q_targets: th.Tensor,
-        weights: th.Tensor,
-        steps: int,
-        max_grad_norm: float | None,
-        batch_indices,
-    ) -> th.Tensor:
-        """``steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2; returns the last loss (a tensor, no host sync)."""
-        net = self.critic
+    def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
+        net, steps = self.critic_net, self.settings.critic_steps
+        if self.fresh_bn_statistics(self.policy.critic):
+            net.reset_bn_counts()
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
-        n = self._sample_count(n_full)
-        if self._compiled(n):
-            return self._fit_critic_compiled(inputs, q_t, c_t, steps, max_grad_norm, batch_indices)
-        # Eager. Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
+        n = self.sample_count(n_full)
+        # Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
         ws = eager_steps.Workspace(net.spec.sizes, n, inputs)
         fixed = eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
         scaled_full = c_t * (2.0 / n_full)
         loss = None
         for step in range(steps):
-            idx = batch_indices(n_full)
+            idx = self.batch_indices(n_full)
             if idx is None:
                 x, q, c2 = inputs, q_t, scaled_full
             else:
                 x, q, c2 = inputs[:, idx], q_t[:, idx], c_t[:, idx] * (2.0 / n)
-            loss = eager_steps.critic_step(net, ws, x, fixed, q, c2, max_grad_norm, want_loss=step == steps - 1)
+            loss = eager_steps.critic_step(net, ws, x, fixed, q, c2, self.settings.max_grad_norm, want_loss=step == steps - 1)
         net.finish_fit(fixed)
         return loss  # type: ignore[return-value]
 
-    def _fit_critic_compiled(self, inputs, q_t, c_t, steps, max_grad_norm, batch_indices) -> th.Tensor:
-        net = self.critic
-        full_stats = compiled_steps.row_var_mean(inputs) if net.spec.bn[0] else None  # fixed data: once per fit
-        loss = th.zeros((), device=inputs.device)
-        running = net.running()
-        for _ in range(steps):
-            idx = batch_indices(inputs.shape[1])
-            x, q, c = (inputs, q_t, c_t) if idx is None else (inputs[:, idx], q_t[:, idx], c_t[:, idx])
-            step = compiled_steps.compiled_step("critic", x.shape[1], net.spec, net.betas, net.eps, max_grad_norm)
-            stats0 = full_stats if idx is None else None
-            loss = step(net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, x, stats0, q, c)
-        return loss
-
     @th.no_grad()
-    def fit_actor(self, obs: th.Tensor, steps: int, max_grad_norm: float | None, inverting: bool, batch_indices) -> th.Tensor:
-        """G Adam steps ascending 1/N sum Q(s, pi(s)) (critic in eval mode); returns the last objective."""
-        net = self.actor
+    def fit_actor(self, obs: th.Tensor) -> th.Tensor:
+        net, steps = self.actor_net, self.settings.actor_steps
+        if steps == 0:
+            return th.zeros(())
+        if self.fresh_bn_statistics(self.policy.actor):
+            net.reset_bn_counts()
         obs_t = obs.float().t().contiguous()
         action_dim = net.spec.sizes[-1]
-        critic_affines = self.critic.eval_affines()
+        critic_affines = self.critic_net.eval_affines()
         w_first, b_first = critic_affines[0]
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         n_full = obs_t.shape[1]
-        n = self._sample_count(n_full)
-        if self._compiled(n):
-            return self._fit_actor_compiled(
-                obs_t, critic_affines, obs_part_full, steps, max_grad_norm, inverting, batch_indices
-            )
+        n = self.sample_count(n_full)
         ws = eager_steps.Workspace(net.spec.sizes, n, obs_t)
         fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
         critic_full = eager_steps.EvalCritic(
-            critic_affines, self.critic.spec.slopes, obs_part_full, action_dim, self.critic.spec.sizes, n
+            critic_affines, self.critic_net.spec.slopes, obs_part_full, action_dim, self.critic_net.spec.sizes, n
         )
         objective = None
         for step in range(steps):
-            idx = batch_indices(n_full)
+            idx = self.batch_indices(n_full)
             o, critic = (obs_t, critic_full) if idx is None else (obs_t[:, idx], critic_full.subset(idx))
             objective = eager_steps.actor_step(
-                net, ws, o, fixed, critic, max_grad_norm, inverting, want_objective=step == steps - 1
+                net,
+                ws,
+                o,
+                fixed,
+                critic,
+                self.settings.max_grad_norm,
+                self.settings.inverting_gradients,
+                want_objective=step == steps - 1,
             )
         net.finish_fit(fixed)
         return objective  # type: ignore[return-value]
-
-    def _fit_actor_compiled(self, obs_t, critic_affines, obs_part_full, steps, max_grad_norm, inverting, batch_indices):
-        net = self.actor
-        w_act = critic_affines[0][0][:, -net.spec.sizes[-1] :].contiguous()  # the critic's action columns
-        objective = th.zeros((), device=obs_t.device)
-        running = net.running()
-        for _ in range(steps):
-            idx = batch_indices(obs_t.shape[1])
-            o, obs_part = (obs_t, obs_part_full) if idx is None else (obs_t[:, idx], obs_part_full[:, idx])
-            key = (net.spec, self.critic.spec.slopes, net.betas, net.eps, max_grad_norm, inverting)
-            step = compiled_steps.compiled_step("actor", o.shape[1], *key)
-            objective = step(
-                net.flat, net.exp_avg, net.exp_avg_sq, net.step_scalars(), running, o, obs_part, w_act, critic_affines
-            )
-        return objective
