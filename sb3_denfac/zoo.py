@@ -417,11 +417,25 @@ def _pre_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: torch threads of ``sb3-denfac-zoo train``/``enjoy`` unless ``--num-threads`` is given: the paper's networks are
+#: tiny, and several threads on a loaded machine made DENFAC's updates many times slower (benchmarks/results/).
+DEFAULT_NUM_THREADS = 1
+
+
+def with_default_threads(argv: Sequence[str]) -> list[str]:
+    """``argv`` with ``--num-threads DEFAULT_NUM_THREADS`` added unless it sets ``--num-threads`` itself."""
+    argv = list(argv)
+    if any(a == "--num-threads" or a.startswith("--num-threads=") for a in argv):
+        return argv
+    return [*argv, "--num-threads", str(DEFAULT_NUM_THREADS)]
+
+
 def prepare_train_args(argv: Sequence[str]) -> list[str]:
     """Complete and check a ``train`` command line; returns the arguments to give to ``rl_zoo3.train.train``."""
     argv = list(argv)
     if any(a in ("-h", "--help") for a in argv):
         return argv
+    argv = with_default_threads(argv)
     args, _ = _pre_parser().parse_known_args(argv)
     for module in args.gym_packages:
         importlib.import_module(module)
@@ -493,7 +507,7 @@ def train(argv: Sequence[str]) -> None:
 def enjoy(argv: Sequence[str]) -> None:
     from rl_zoo3.enjoy import enjoy as zoo_enjoy
 
-    _run_with_argv("sb3-denfac-zoo enjoy", argv, zoo_enjoy)
+    _run_with_argv("sb3-denfac-zoo enjoy", with_default_threads(argv), zoo_enjoy)
 
 
 def record_video(argv: Sequence[str]) -> None:
@@ -511,9 +525,10 @@ COMMANDS: dict[str, Callable[[Sequence[str]], None]] = {
 USAGE = """usage: sb3-denfac-zoo {train,optimize,enjoy,record_video} [zoo options]
 
   train         rl_zoo3 train (defaults: --algo denfac --env sb3_denfac/ContinuousCartPole-v0,
-                --conf-file sb3_denfac/hyperparams/<algo>.yml); add -optimize to tune with Optuna
+                --conf-file sb3_denfac/hyperparams/<algo>.yml, --num-threads 1); add -optimize to tune
+                with Optuna
   optimize      same as train -optimize (default storage sqlite:///<log-folder>/optuna.db, study <algo>-<env>)
-  enjoy         rl_zoo3 enjoy
+  enjoy         rl_zoo3 enjoy (default --num-threads 1)
   record_video  rl_zoo3 record_video
 
 Algorithms: denfac, ddpg (ours, inverting gradients), nfac, cacla, cmaes, plus the zoo's (td3, sac, crossq, sb3_ddpg, ...).

@@ -13,6 +13,7 @@ import gymnasium as gym
 import optuna
 import pytest
 import sqlalchemy
+import torch as th
 from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -69,6 +70,22 @@ def test_zoo_trains_from_yaml(algo: str, tmp_path: Path) -> None:
     tags = _scalar_tags(tb / ENV_FOLDER)
     assert any(tag.startswith("train/") for tag in tags), tags  # the algorithm's internals
     assert any(tag.startswith("rollout/") for tag in tags), tags  # return curves
+
+
+@pytest.mark.parametrize("explicit", [None, "2"])
+def test_train_uses_one_torch_thread_unless_told(explicit: str | None, tmp_path: Path) -> None:
+    """The command line defaults to one torch thread (several collapse on a loaded machine); --num-threads wins."""
+    argv = ["train", "--algo", "cmaes", "--env", ENV, "-n", "100", "-f", str(tmp_path), "--eval-freq", "-1"]
+    argv += ["--verbose", "0", "-params", *CHEAP_PARAMS["cmaes"]]
+    if explicit is not None:
+        argv += ["--num-threads", explicit]
+    th.set_num_threads(3)  # neither the default nor the explicit value
+    try:
+        zoo.main(argv)
+        assert th.get_num_threads() == (1 if explicit is None else int(explicit))
+    finally:
+        th.set_num_threads(1)
+    assert zoo.prepare_train_args(argv[1:]).count("--num-threads") == 1
 
 
 @pytest.mark.parametrize("algo", sorted(zoo.ALGORITHMS))
