@@ -27,7 +27,6 @@ class DENFACReplayBufferSamples(NamedTuple):
     behaviour_means: th.Tensor
     #: 1 where the episode was cut by a time limit (``TimeLimit.truncated``)
     timeouts: th.Tensor
-    discounts: th.Tensor | None = None
 
 
 class DENFACReplayBuffer(ReplayBuffer):

@@ -18,8 +18,8 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, Flatten
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
-from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
-from sb3_denfac.common.truncated_normal import clamp_mean, sample_truncated_normal
+from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
+from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "qf": [50, 7]}
 
@@ -110,10 +110,6 @@ class DENFACActor(BasePolicy):
     def sample(self, mean: np.ndarray) -> np.ndarray:
         """Truncated Gaussian N(mean, sigma^2) on [-1, 1] (numpy, seeded by SB3 through ``np.random``)."""
         return sample_truncated_normal(mean, self.sigma, -1.0, 1.0)
-
-    def behaviour_mean(self, mean: th.Tensor | np.ndarray):
-        """The mean stored as mu_b(s): clamped to [-1 - 3 sigma, 1 + 3 sigma] as the shared density does."""
-        return clamp_mean(mean, -1.0, 1.0, self.sigma)
 
 
 class DENFACCritic(BaseModel):
@@ -298,10 +294,6 @@ class DENFACPolicy(BasePolicy):
         """Re-initialise the critic in place (weights and BN statistics) and forget its Adam state."""
         reset_parameters_(self.critic, self.init)
         self.critic.optimizer.state.clear()
-
-    @staticmethod
-    def set_bn_training_mode(net: nn.Module, mode: bool) -> None:
-        set_bn_training_mode(net, mode)
 
 
 MlpPolicy = DENFACPolicy
