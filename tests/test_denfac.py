@@ -14,6 +14,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 from torch import nn
 
+from sb3_denfac.common.truncated_normal import clamp_mean
 from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
@@ -41,7 +42,10 @@ class TargetActionEnv(gym.Env):
 
 
 def test_buffer_stores_behaviour_means_and_actions_in_bounds(make_denfac):
-    model = make_denfac().learn(100)
+    model = make_denfac().learn(50)  # one 50-step episode, then one update
+    actor = copy.deepcopy(model.actor)
+    actor.set_training_mode(False)
+    model.learn(50, reset_num_timesteps=False)  # the second episode is played by that actor
     buffer = model.replay_buffer
     n = buffer.size()
     assert n == 100
@@ -49,7 +53,9 @@ def test_buffer_stores_behaviour_means_and_actions_in_bounds(make_denfac):
     assert np.all(np.abs(actions) <= 1.0)
     assert np.all(np.isfinite(means)) and np.all(np.abs(means) <= 1.0 + 3 * model.sigma)
     # The stored mean is the actor output for the stored observation after the update that preceded it.
-    assert not np.allclose(means, 0.0)
+    with th.no_grad():
+        played = actor(th.as_tensor(buffer.observations[50:100, 0])).numpy()
+    np.testing.assert_allclose(means[50:100], clamp_mean(played, -1.0, 1.0, model.sigma), rtol=1e-5, atol=1e-6)
 
 
 def test_importance_weights_of_the_update_path_match_scipy(make_denfac):
