@@ -10,11 +10,12 @@ import pytest
 import torch as th
 
 from sb3_denfac.denfac import DENFAC
+from sb3_denfac.denfac.presets import paper
 
 th.set_num_threads(1)
 
-#: Small DENFAC settings for fast tests (overridden by keyword).
-SMALL_DENFAC = dict(
+#: Small DENFAC settings for fast tests of Algorithm 1 as written (the paper preset, small; overridden by keyword).
+SMALL_DENFAC = paper(
     buffer_size=200,
     n_fitted_iterations=2,
     critic_steps=3,
@@ -29,6 +30,7 @@ def make_denfac():
 
     def make(env=None, **kwargs) -> DENFAC:
         params = {**SMALL_DENFAC, **kwargs}
+        params["policy_kwargs"] = {**SMALL_DENFAC["policy_kwargs"], **kwargs.get("policy_kwargs", {})}
         return DENFAC("MlpPolicy", env or gym.make("Pendulum-v1", max_episode_steps=50), seed=0, **params)
 
     return make

@@ -45,7 +45,7 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
         n_fitted_iterations=1,
         critic_steps=2,
         actor_steps=2,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
     ),
     "denfac_plain": dict(
         update_path="plain",
@@ -53,7 +53,7 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
         n_fitted_iterations=1,
         critic_steps=2,
         actor_steps=2,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
     ),
     "ddpg": dict(
         buffer_size=5 * EPISODE,

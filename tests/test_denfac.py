@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -16,6 +17,7 @@ from torch import nn
 
 from sb3_denfac.common.truncated_normal import clamp_mean
 from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
+from sb3_denfac.denfac.presets import paper
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
 
@@ -202,22 +204,38 @@ def test_learns_target_action():
     model = DENFAC(
         "MlpPolicy",
         env,
-        buffer_size=200,
-        gamma=0.0,
-        sigma=0.3,
-        n_fitted_iterations=3,
-        critic_steps=20,
-        actor_steps=25,
-        critic_learning_rate=0.01,
-        actor_learning_rate=0.01,
-        policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])),
         seed=1,
+        **paper(
+            buffer_size=200,
+            gamma=0.0,
+            sigma=0.3,
+            n_fitted_iterations=3,
+            critic_steps=20,
+            actor_steps=25,
+            critic_learning_rate=0.01,
+            actor_learning_rate=0.01,
+            policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])),
+        ),
     )
     obs = np.stack([env.observation_space.sample() for _ in range(64)])
     start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
     model.learn(300)
     end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
     assert start > 0.4 and end < 0.15, (start, end)
+
+
+def test_default_configuration_learns_target_action():
+    """DENFAC("MlpPolicy", env) with its defaults only (but fewer steps per update) moves the actor to the rewarded
+    action: mini-batches, a kept actor and critic, no weights, no batch norm."""
+    env = TargetActionEnv()
+    model = DENFAC("MlpPolicy", env, gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
+    assert model.batch_size == 256 and not model.reset_actor and model.weighting == "none"
+    assert not model.policy.actor.batch_norm and model.policy.net_arch == {"pi": [64, 64], "qf": [64, 64]}
+    obs = np.stack([env.observation_space.sample() for _ in range(64)])
+    start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    model.learn(200)
+    end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    assert end < 0.1 and end < start / 2, (start, end)
 
 
 class OneStepFirstEpisodeEnv(TargetActionEnv):
@@ -237,3 +255,16 @@ def test_one_transition_buffer_waits_for_the_next_episode(make_denfac, update_pa
     assert model.replay_buffer.size() == 1 and model._n_updates == 0
     model.learn(10, reset_num_timesteps=False)
     assert model._n_updates == 1
+
+
+def test_model_saved_by_version_0_1_loads_with_its_own_defaults():
+    """sb3-denfac 0.1 saved no net_arch/batch_norm/init when they were defaults: it loads with the paper's
+    networks it was built with (not 0.2's defaults) and predicts exactly as when it was saved."""
+    data = Path(__file__).parent / "data"
+    model = DENFAC.load(data / "denfac_v0.1_pendulum.zip", device="cpu")
+    assert model.policy.net_arch == {"pi": [20], "qf": [50, 7]} and model.policy.actor.batch_norm
+    assert model.weighting == "retrace" and model.reset_actor and model.batch_size is None
+    obs = np.load(data / "denfac_v0.1_pendulum_obs.npy")
+    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], np.load(data / "denfac_v0.1_pendulum_actions.npy"))
+    model.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
+    model.learn(50, reset_num_timesteps=False)  # and trains on

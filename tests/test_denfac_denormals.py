@@ -14,6 +14,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
 
 from sb3_denfac import DENFAC
+from sb3_denfac.denfac.presets import paper
 
 TINY = float(th.finfo(th.float32).tiny)
 
@@ -45,12 +46,9 @@ def warm_up_model(tmp_path_factory):
     model = DENFAC(
         "MlpPolicy",
         gym.make("sb3_denfac/ContinuousAcrobot-v0"),
-        buffer_size=1000,
         learning_starts=10**9,  # uniform actions: the behaviour density is 1/2, the target's is tiny for most
-        gamma=0.9,
-        reset_critic=True,
-        policy_kwargs=dict(net_arch=dict(pi=[5], qf=[50, 7])),
         seed=0,
+        **paper(buffer_size=1000, gamma=0.9, reset_critic=True, policy_kwargs=dict(net_arch=dict(pi=[5], qf=[50, 7]))),
     )
     model.learn(1000)
     path = tmp_path_factory.mktemp("denormals")

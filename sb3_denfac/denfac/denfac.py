@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from typing import Any, ClassVar, TypeVar
@@ -22,6 +23,7 @@ from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer
 from sb3_denfac.denfac.fast import FastUpdater, supported_networks
 from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.presets import DEFAULT_POLICY_KWARGS
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
@@ -47,6 +49,21 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         pi_k <- random actor if reset_actor else pi_{k-1}; G Adam steps ascending 1/N sum Q_k(s_t, pi_k(s_t))
                 (with inverting gradients if ``inverting_gradients``)
 
+    Two configurations (:mod:`~sb3_denfac.denfac.presets`):
+
+    - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam
+      (step 1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25
+      actor steps per iteration, the actor and the critic kept across iterations and episodes, 64-64 networks without
+      batch norm and PyTorch's initialisation, sigma = 0.1 and no importance weights. The reasons, one per change from
+      the paper (ablations in ``benchmarks/results/denfac_ablation/``): a step of 0.1 with beta1 = 0 makes each step
+      about lr * sign(g), too coarse once Q is in the hundreds; a re-initialised actor gets only G steps to re-learn
+      pi from scratch, so the policy jumps between updates; the 50-7 critic with 10 full-batch steps per iteration is
+      under-fitted on returns of hundreds; with sigma small, min(1, pi/pi_b) is ~0 for nearly every sample once the
+      actor has moved, which throws most of D away (the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no
+      weight to evaluate pi: ``weighting="retrace"`` stays available).
+    - **Paper** (``DENFAC("MlpPolicy", env, **presets.PAPER)``, and the zoo YAML entries of the paper's envs with
+      Figure 5's per-env values): Algorithm 1 as written, with the authors' solver and networks.
+
     Implementation choices (documented differences or precisions):
 
     - Time limits: truncated episodes bootstrap (``bootstrap_on_timeout=True``, SB3 semantics). The paper-era authors'
@@ -54,26 +71,26 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     - Loss scale: 1/N as in Algorithm 1 (the authors' code uses 1/(2N)); Adam is invariant to a constant loss factor
       except through ``adam_eps`` and ``max_grad_norm``.
     - Target actions pi_{k-1}(s') are clipped to [-1, 1] (the executed policy never leaves the bounds).
-    - Batch norm: targets and importance weights use eval mode (running statistics); the critic is in eval mode during
-      the actor steps (gradients of the fitted function, no update of its statistics). With the default
-      ``bn_momentum=None`` the running statistics are reset at every fit and are the cumulative average over its
-      full-batch steps, so eval mode uses the statistics of the buffer.
+    - Batch norm (``policy_kwargs=dict(batch_norm=True)``, the paper's): targets and importance weights use eval mode
+      (running statistics); the critic is in eval mode during the actor steps (gradients of the fitted function, no
+      update of its statistics). With ``bn_momentum=None`` the running statistics are reset at every fit and are the
+      cumulative average over its steps, so eval mode uses the statistics of the buffer.
     - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
+    - Importance weights below sqrt(float32's smallest normal) are exactly 0 (subnormal arithmetic is many times
+      slower; their contribution is below float32's resolution).
     - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
       ValueError, and ``load`` refuses corrupted zips and zips or replay buffers of another algorithm.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
-    :param learning_rate: SB3 learning rate (float or schedule), used for a network whose own rate below is None.
-        Default 0.1: Figure 5 lists 0.1 under alpha_a/alpha_c for every env. The update resets the actor and takes only
-        G Adam steps from N(0, 0.01) weights, so small rates barely move it: a 2-seed CartPole sweep gave a best-so-far
-        return after 60 episodes of about -820 (1e-3), -710 (1e-2), -380 (3e-2), -270 (1e-1).
+    :param learning_rate: SB3 learning rate (float or schedule), used for a network whose own rate below is None
+        (paper, Figure 5: alpha_a = alpha_c = 0.1)
     :param actor_learning_rate: alpha_a, Adam step size of the actor (takes precedence over ``learning_rate``)
     :param critic_learning_rate: alpha_c, Adam step size of the critic (takes precedence over ``learning_rate``)
     :param buffer_size: D, size of the FIFO replay buffer (paper: 3000-6000)
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
-    :param batch_size: None (default) = full batch (the whole buffer at every step, paper); an int = one uniformly
-        drawn mini-batch of that size per critic/actor step
+    :param batch_size: an int = one uniformly drawn mini-batch of that size per critic/actor step; None = full batch
+        (the whole buffer at every step, paper)
     :param gamma: discount factor gamma
     :param n_fitted_iterations: K, fitted iterations per update (paper: 10)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)
@@ -84,7 +101,7 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     :param weighting: "retrace" (c = min(1, pi_{k-1}(a|s)/pi_b(a|s))), "retrace_next_state_quirk" (the authors' code
         evaluates pi_{k-1} at s' instead of s) or "none" (c = 1)
     :param sigma: std of the truncated Gaussian exploration in the scaled action space (paper: 0.05)
-    :param adam_betas: Adam (beta1, beta2); default (0.0, 0.999) as the authors' Caffe solver (beta1 = 0)
+    :param adam_betas: Adam (beta1, beta2) (authors' Caffe solver: (0.0, 0.999))
     :param adam_eps: Adam epsilon (authors: 1e-8)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
@@ -98,8 +115,10 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
-    :param policy_kwargs: policy keyword arguments: ``net_arch=dict(pi=[20], qf=[50, 7])``, ``batch_norm``, ``init``
-        ("paper" N(0, 0.01^2) or "default"), ``bn_momentum``, ``activation_fn`` (see :class:`DENFACPolicy`)
+    :param policy_kwargs: policy keyword arguments: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper
+        ``dict(pi=[20], qf=[50, 7])``), ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's;
+        "paper": N(0, 0.01^2)), ``bn_momentum``, ``activation_fn`` (see :class:`DENFACPolicy`); the keys it leaves out
+        take :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
@@ -114,22 +133,22 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         self,
         policy: str | type[DENFACPolicy],
         env: GymEnv | str,
-        learning_rate: float | Schedule = 0.1,
+        learning_rate: float | Schedule = 1e-3,
         actor_learning_rate: float | None = None,
         critic_learning_rate: float | None = None,
-        buffer_size: int = 6000,
+        buffer_size: int = 100_000,
         learning_starts: int = 0,
-        batch_size: int | None = None,
+        batch_size: int | None = 256,
         gamma: float = 0.99,
         n_fitted_iterations: int = 10,
-        critic_steps: int = 10,
+        critic_steps: int = 50,
         actor_steps: int = 25,
         reset_critic: bool = False,
-        reset_actor: bool = True,
+        reset_actor: bool = False,
         inverting_gradients: bool = True,
-        weighting: str = "retrace",
-        sigma: float = 0.05,
-        adam_betas: tuple[float, float] = (0.0, 0.999),
+        weighting: str = "none",
+        sigma: float = 0.1,
+        adam_betas: tuple[float, float] = (0.9, 0.999),
         adam_eps: float = 1e-8,
         max_grad_norm: float | None = 10.0,
         bootstrap_on_timeout: bool = True,
@@ -205,6 +224,10 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
         self.bootstrap_on_timeout = bootstrap_on_timeout
         self.update_path = update_path
         self._check_episode_length()
+        # Written into policy_kwargs, so a saved model keeps them if the defaults change; ``load`` replaces
+        # policy_kwargs with the saved ones (models of 0.1 saved none: DENFACPolicy's own, the paper's, apply).
+        for key, value in DEFAULT_POLICY_KWARGS.items():
+            self.policy_kwargs.setdefault(key, copy.deepcopy(value))
         if _init_setup_model:
             self._setup_model()
 
