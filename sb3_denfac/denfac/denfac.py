@@ -7,7 +7,6 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
@@ -16,6 +15,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import update_learning_rate
 from torch.nn.utils import clip_grad_norm_
 
+from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
@@ -30,7 +30,7 @@ WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
 UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
 
 
-class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
+class DENFAC(InputChecksMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
     Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
@@ -177,11 +177,9 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             device=device,
             seed=seed,
             sde_support=False,
-            supported_action_spaces=None,  # checked below with a clear message
+            supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
             support_multi_env=True,  # checked below with a clear message
         )
-        if getattr(self, "action_space", None) is not None and not isinstance(self.action_space, spaces.Box):
-            raise ValueError(f"DENFAC needs a continuous (Box) action space, got {self.action_space}")
         if self.env is not None and self.n_envs != 1:
             raise ValueError(
                 f"DENFAC updates at the end of every episode and needs a single environment, got n_envs={self.n_envs}"
