@@ -20,6 +20,7 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
 from sb3_denfac.common.budget import budget_reached
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -38,7 +39,7 @@ class _Randn:
         return self.rng.standard_normal(shape)
 
 
-class CMAES(InputChecksMixin, BaseAlgorithm):
+class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
     """CMA-ES over the weights of the actor network, the actor-only baseline of the DENFAC paper.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4: CMA-ES (Hansen

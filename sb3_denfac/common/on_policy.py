@@ -34,6 +34,7 @@ from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_positive
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
@@ -271,7 +272,7 @@ class TransitionBuffer:
         )
 
 
-class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and

@@ -15,6 +15,7 @@ from stable_baselines3.ddpg import DDPG as SB3DDPG
 from torch.nn import functional as F
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
@@ -22,7 +23,7 @@ from sb3_denfac.common.networks import set_bn_training_mode
 from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
 
 
-class DDPG(InputChecksMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
+class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
     """Deep Deterministic Policy Gradient (Lillicrap et al. 2016) in the configuration the DENFAC paper compares with.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4, Figure 5: DDPG with

@@ -16,6 +16,7 @@ from stable_baselines3.common.utils import update_learning_rate
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
@@ -30,7 +31,9 @@ WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
 UPDATE_PATHS = ("auto", "fast", "compiled", "plain")
 
 
-class DENFAC(InputChecksMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
+class DENFAC(
+    InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm
+):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
     Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
