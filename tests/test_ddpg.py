@@ -11,9 +11,9 @@ from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.utils import get_parameters_by_name
 from torch import nn
 
+from sb3_denfac.common.checks import UnsupportedSpaceError
 from sb3_denfac.common.exploration import behaviour_log_prob
 from sb3_denfac.ddpg import DDPG
-from sb3_denfac.common.checks import UnsupportedSpaceError
 
 
 class ConstantTargetEnv(gym.Env):

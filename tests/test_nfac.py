@@ -183,7 +183,6 @@ def test_save_load_exact(tmp_path):
     assert loaded.num_timesteps >= 80
 
 
-@pytest.mark.filterwarnings("ignore:rich is experimental")
 def test_tensorboard_callbacks_progress_bar(tmp_path):
     class Count(BaseCallback):
         def __init__(self):
