@@ -134,7 +134,7 @@ def test_actor_update_moves_only_toward_selected_actions():
 def test_rollout_stores_truncation_and_termination():
     for terminate in (False, True):
         model = NFAC("MlpPolicy", TargetEnv(ep_len=5, terminate=terminate), n_episodes=2, seed=0)
-        model.learn(1)  # one rollout of 2 episodes, then one update
+        model.learn(10)  # one rollout of two 5-step episodes, then one update
         data = model.rollout_buffer.get(model.device)
         assert len(data.rewards) == 10
         expected = np.zeros(10)
