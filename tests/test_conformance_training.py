@@ -63,7 +63,7 @@ def test_learning_rate_schedule(name: str) -> None:
             assert group["lr"] <= 0.5e-3, "learning_rate schedule ignored"
 
 
-@pytest.mark.parametrize("name", ["ddpg", "cacla"])  # step-wise algorithms
+@pytest.mark.parametrize("name", ["ddpg", "nfac", "cacla"])  # not the algorithms that update after each episode
 def test_several_envs(name: str) -> None:
     from stable_baselines3.common.env_util import make_vec_env
 

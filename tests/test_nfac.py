@@ -249,8 +249,12 @@ def test_bad_hyperparameters(kwargs, name):
 def test_unsupported_spaces_and_several_envs():
     with pytest.raises(ValueError, match="Box"):
         NFAC("MlpPolicy", "CartPole-v1")
-    with pytest.raises(ValueError, match="n_envs"):
-        NFAC("MlpPolicy", make_vec_env(TargetEnv, n_envs=2))
+    # Several envs: the rollout ends once n_episodes episodes have ended in all, and holds every env's transitions.
+    model = NFAC("MlpPolicy", make_vec_env(TargetEnv, n_envs=2, env_kwargs=dict(ep_len=5)), n_episodes=2, seed=0)
+    model.learn(10)
+    assert model.num_timesteps == 10 and model._n_updates == 1
+    data = model.rollout_buffer.get(model.device)
+    assert len(data.rewards) == 10
 
 
 def test_options_and_numpy_hyperparameters():

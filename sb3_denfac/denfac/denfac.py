@@ -62,6 +62,8 @@ class DENFAC(
       ``bn_momentum=None`` the running statistics are reset at every fit and are the cumulative average over its
       full-batch steps, so eval mode uses the statistics of the buffer.
     - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
+    - Budget: ``learn(total_timesteps)`` stops at ``total_timesteps``, also inside an episode, and then updates on the
+      buffer as it is (the unfinished episode bootstraps); see :mod:`sb3_denfac.common.budget`.
     - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
       ValueError, and ``load`` refuses corrupted zips and zips or replay buffers of another algorithm.
 

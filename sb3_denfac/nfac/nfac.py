@@ -47,11 +47,13 @@ class NFAC(DeterministicOnPolicyAlgorithm):
     carry over to eval mode: on a 10-step task the learned actions were several times worse.)
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
-    :param env: environment or its registered id; a single environment (episode-wise updates).
+    :param env: environment or its registered id, one or several: a rollout ends when ``n_episodes`` episodes have
+        ended in all, and the episodes still running in the other environments enter the update as they are (their
+        last transition bootstraps) and go on in the next rollout.
     :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
-    :param n_episodes: episodes collected per update (authors: 1).
+    :param n_episodes: episodes finished per update, over all environments (authors: 1).
     :param n_fitted_iterations: K, fitted rounds of the critic per update (authors' ``number_fitted_iteration``).
     :param critic_steps: full-batch Adam steps per fitted round (authors' ``stoch_iter``).
     :param actor_steps: full-batch Adam steps of the actor per update (authors' ``stoch_iter``).
@@ -111,7 +113,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             learning_rate=learning_rate,
             actor_learning_rate=actor_learning_rate,
             critic_learning_rate=critic_learning_rate,
-            n_steps=1,  # unused: rollouts are whole episodes
+            n_steps=1,  # unused: rollouts end with episodes
             gamma=gamma,
             sigma=sigma,
             max_grad_norm=max_grad_norm,
@@ -123,8 +125,6 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             device=device,
             _init_setup_model=False,
         )
-        if self.env is not None:
-            self._check_n_envs(self.n_envs)
         self.n_episodes = n_episodes
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
@@ -134,11 +134,6 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         self.update_critic_first = update_critic_first
         if _init_setup_model:
             self._setup_model()
-
-    @staticmethod
-    def _check_n_envs(n_envs: int) -> None:
-        if n_envs != 1:
-            raise ValueError(f"NFAC learns from whole episodes and needs a single environment, got n_envs={n_envs}")
 
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
         return n_episodes >= self.n_episodes or budget_reached(self)  # an unfinished episode is used as it is
