@@ -52,9 +52,9 @@ class StopAtTotalTimestepsMixin:
         finally:
             self._rollout_counts = None
 
-    def _store_transition(self, replay_buffer: Any, buffer_action: np.ndarray, new_obs: Any, reward: np.ndarray,
-                          dones: np.ndarray, infos: list[dict[str, Any]]) -> None:  # fmt: skip
-        super()._store_transition(replay_buffer, buffer_action, new_obs, reward, dones, infos)  # type: ignore[misc]
+    def _store_transition(self, replay_buffer: Any, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
+        super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)  # type: ignore[misc]
+        dones = args[2] if len(args) > 2 else kwargs["dones"]  # SB3: (new_obs, reward, dones, infos)
         if self._rollout_counts is None:
             return
         self._rollout_counts[0] += 1
