@@ -89,6 +89,7 @@ def _saved_zoo_agent(logs: Path, env_id: str) -> None:
     from sb3_denfac import CMAES
 
     folder = logs / "cmaes" / f"{env_id.replace('/', '-')}_1"
+    folder.mkdir(parents=True)
     CMAES("MlpPolicy", gym.make(env_id, max_episode_steps=10), population_size=2).save(folder / env_id.replace("/", "-"))
 
 

@@ -69,7 +69,9 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
     the best candidate and its return, and the generation count.
 
     Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
-    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
+    a ValueError, ``load`` refuses corrupted zips and zips saved by another algorithm, and an action space that is not
+    a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a ValueError that is
+    also SB3's AssertionError).
 
     :param policy: policy class or "MlpPolicy" (:class:`sb3_denfac.cmaes.policies.CMAESPolicy`; policy_kwargs:
         ``net_arch``, ``batch_norm`` (default False), ``init``, ``activation_fn``)

@@ -276,7 +276,9 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
-    corrupted or foreign model files raise a ValueError (:class:`~sb3_denfac.common.checks.InputChecksMixin`).
+    corrupted or foreign model files raise a ValueError (:class:`~sb3_denfac.common.checks.InputChecksMixin`), and an
+    action space that is not a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError`
+    (a ValueError that is also SB3's AssertionError).
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 

@@ -37,7 +37,9 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
     outputs back; targets and executed actions use the actor output clamped to [-1, 1].
 
     Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
-    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
+    a ValueError, ``load`` refuses corrupted zips and zips saved by another algorithm, and an action space that is not
+    a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a ValueError that is
+    also SB3's AssertionError).
 
     Differences from SB3's DDPG: networks and exploration above; separate actor and critic learning rates (alpha_a,
     alpha_c); with ``batch_norm=False``, ``init="default"``, ``activation_fn=nn.ReLU``, a tanh actor and ``sigma=None`` it

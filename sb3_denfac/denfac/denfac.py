@@ -65,7 +65,9 @@ class DENFAC(
     - Budget: ``learn(total_timesteps)`` stops at ``total_timesteps``, also inside an episode, and then updates on the
       buffer as it is (the unfinished episode bootstraps); see :mod:`sb3_denfac.common.budget`.
     - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
-      ValueError, and ``load`` refuses corrupted zips and zips or replay buffers of another algorithm.
+      ValueError, ``load`` refuses corrupted zips and zips or replay buffers of another algorithm, and an action space
+      that is not a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a
+      ValueError that is also SB3's AssertionError).
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
