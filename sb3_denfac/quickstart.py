@@ -5,9 +5,12 @@
 Writes, under ``--log-dir`` (default ``runs/quickstart``):
 - ``tensorboard/``: SB3's TensorBoard logs (rollout returns and the algorithm's ``train/`` internals);
 - ``0.monitor.csv``: SB3's Monitor file, one row per training episode (return, length, the paper's measure);
-- ``learning_curve.png``: per-episode performance and the best registered performance so far (the paper's Figure 3 measure);
-- ``model.zip``: the trained model (``DENFAC.load(path)``).
-It ends by printing these paths, the TensorBoard command and the deterministic policy's performance.
+- ``learning_curve.png``: per-episode performance and the best registered performance so far (the paper's Figure 3
+  measure; the episode return on envs without ``info["paper_performance"]``);
+- ``model.zip``: the model after training (``DENFAC.load(path)``);
+- ``best_model.zip``: the model as it was when it played its best training episode (the authors' "best of stored
+  policies": learning is not monotone, the last policy can be far worse than the best one).
+It ends by printing these paths, the TensorBoard command and the deterministic performance of both policies.
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch as th
-from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 from stable_baselines3.common.monitor import load_results
 
 from sb3_denfac import zoo
+from sb3_denfac.common.callbacks import EpisodePerformanceCallback, ProgressBarCallback
+from sb3_denfac.envs import PAPER_PERFORMANCE_KEY
 
 #: Which direction is better for each env's paper measure (Acrobot: steps to reach the goal).
 LOWER_IS_BETTER = ("Acrobot",)
@@ -33,7 +37,9 @@ def best_so_far(values: np.ndarray, lower_is_better: bool) -> np.ndarray:
     return np.minimum.accumulate(values) if lower_is_better else np.maximum.accumulate(values)
 
 
-def plot_learning_curve(performance: np.ndarray, env_id: str, algo: str, lower_is_better: bool, path: Path) -> None:
+def plot_learning_curve(
+    performance: np.ndarray, env_id: str, algo: str, lower_is_better: bool, path: Path, measure: str = "episode return"
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -44,12 +50,26 @@ def plot_learning_curve(performance: np.ndarray, env_id: str, algo: str, lower_i
     ax.plot(episodes, performance, ".", alpha=0.5, label="episode performance (with exploration)")
     ax.plot(episodes, best_so_far(performance, lower_is_better), "-", lw=2, label="best registered performance so far")
     ax.set_xlabel("episode")
-    ax.set_ylabel("steps to goal (lower is better)" if lower_is_better else "episode return (higher is better)")
+    ax.set_ylabel(f"{measure} ({'lower' if lower_is_better else 'higher'} is better)")
     ax.set_title(f"{algo.upper()} on {env_id}")
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def evaluate(model, env_id: str, seed: int) -> float:
+    """One deterministic episode: its ``paper_performance`` if the env gives one, else its return."""
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=seed)
+    done, info, episode_return = False, {}, 0.0
+    while not done:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, info = env.step(action)
+        episode_return += float(reward)
+        done = terminated or truncated
+    env.close()
+    return float(info.get(PAPER_PERFORMANCE_KEY, episode_return))
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -64,54 +84,62 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
+    try:  # before anything is written
+        zoo.register()
+        zoo.check_env_id(args.env)
+        hyperparams = zoo.load_hyperparams(args.algo, args.env)  # the package's zoo YAML (the paper's Figure 5 values)
+    except zoo.ZooConfigError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")
     # The paper's networks are tiny: extra intra-op threads only add synchronisation. Measured on a loaded 2-core
     # machine, a DENFAC update took 0.1 s with one thread and up to 33 s with the default two.
     th.set_num_threads(args.threads)
 
     run_dir = args.log_dir / f"{args.algo}_{args.env.replace('/', '-')}_seed{args.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
-    # Hyperparameters from the package's zoo YAML (the paper's Figure 5 values), model built as the RL Zoo builds it.
-    hyperparams = zoo.load_hyperparams(args.algo, args.env)
-    model = zoo.make_model(
+    model = zoo.make_model(  # built as the RL Zoo builds it
         args.algo, args.env, hyperparams, seed=args.seed, monitor_dir=run_dir, tensorboard_log=str(run_dir / "tensorboard")
     )
+    lower = any(name in args.env for name in LOWER_IS_BETTER)
+    # Counts episodes, stops after the budget and saves the policy of each new best episode.
+    episodes = EpisodePerformanceCallback(args.episodes, lower_is_better=lower, best_model_path=str(run_dir / "best_model"))
+    callbacks = [episodes, *([ProgressBarCallback(max_episodes=args.episodes)] if args.progress_bar else [])]
     max_steps = gym.spec(args.env).max_episode_steps or 1000
     start = time.time()
-    model.learn(
-        total_timesteps=args.episodes * max_steps,
-        callback=StopTrainingOnMaxEpisodes(max_episodes=args.episodes),
-        tb_log_name=args.algo.upper(),
-        progress_bar=args.progress_bar,
-    )
+    model.learn(total_timesteps=args.episodes * max_steps, callback=callbacks, tb_log_name=args.algo.upper())
     wall = time.time() - start
     model.save(run_dir / "model.zip")
     model.get_env().close()
 
-    performance = load_results(str(run_dir))["paper_performance"].to_numpy(dtype=float)
-    lower = any(name in args.env for name in LOWER_IS_BETTER)
-    plot_learning_curve(performance, args.env, args.algo, lower, run_dir / "learning_curve.png")
+    monitor = load_results(str(run_dir))
+    has_measure = PAPER_PERFORMANCE_KEY in monitor.columns
+    performance = monitor[PAPER_PERFORMANCE_KEY if has_measure else "r"].to_numpy(dtype=float)
+    measure = ("steps to goal" if lower else "paper performance") if has_measure else "episode return"
+    plot_learning_curve(performance, args.env, args.algo, lower, run_dir / "learning_curve.png", measure)
 
-    eval_env = gym.make(args.env)
-    obs, _ = eval_env.reset(seed=args.seed + 1000)
-    done, info = False, {}
-    while not done:
-        action, _ = model.predict(obs, deterministic=True)
-        obs, _, terminated, truncated, info = eval_env.step(action)
-        done = terminated or truncated
     best = best_so_far(performance, lower)[-1]
+    best_episode = int(np.flatnonzero(performance == best)[0]) + 1
+    final = evaluate(model, args.env, args.seed + 1000)
+    best_model = type(model).load(run_dir / "best_model.zip", device="cpu")
+    best_eval = evaluate(best_model, args.env, args.seed + 1000)
     summary = {
         "episodes": len(performance),
         "best_training_performance": float(best),
-        "final_deterministic_performance": float(info["paper_performance"]),
+        "best_episode": best_episode,
+        "final_deterministic_performance": final,
+        "best_model_deterministic_performance": best_eval,
         "wall_time_s": wall,
         "run_dir": str(run_dir),
     }
+    direction = "lower" if lower else "higher"
     print(f"Trained {args.algo.upper()} on {args.env} for {len(performance)} episodes in {wall:.0f} s.")
-    print(f"  best registered performance so far: {best:.1f} ({'lower' if lower else 'higher'} is better)")
-    print(f"  deterministic policy after training: {summary['final_deterministic_performance']:.1f}")
+    print(f"  best registered performance ({measure}, {direction} is better): {best:.1f}, at episode {best_episode}")
+    print(f"  deterministic policy after training (model.zip): {final:.1f}")
+    print(f"  deterministic policy of the best episode (best_model.zip): {best_eval:.1f}")
+    print("  Learning is not monotone: the last policy can be far from the best one; the best registered performance")
+    print("  was played with exploration noise, so a deterministic replay of that policy can differ too.")
     print(f"  learning curve (PNG):  {run_dir / 'learning_curve.png'}")
     print(f"  per-episode results:   {run_dir / '0.monitor.csv'}")
-    print(f"  model:                 {run_dir / 'model.zip'}")
+    print(f"  models:                {run_dir / 'model.zip'}, {run_dir / 'best_model.zip'}")
     print(f"  TensorBoard:           tensorboard --logdir {run_dir / 'tensorboard'}")
     return summary
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import importlib
+import importlib.util
 import inspect
 import os
 import runpy
@@ -511,6 +512,17 @@ def enjoy(argv: Sequence[str]) -> None:
 
 
 def record_video(argv: Sequence[str]) -> None:
+    """``rl_zoo3.record_video``, headless: the envs render to ``rgb_array`` (pygame, no display) and moviepy writes the
+    mp4; both come with the ``video`` extra. Without a display, MuJoCo (Half-Cheetah) renders with EGL unless
+    ``MUJOCO_GL`` says otherwise."""
+    missing = [name for name in ("pygame", "moviepy") if importlib.util.find_spec(name) is None]
+    if missing and not any(a in ("-h", "--help") for a in argv):
+        raise ZooConfigError(
+            f"record_video needs {' and '.join(missing)} (rendering and mp4 writing): pip install 'sb3-denfac[video]'"
+        )
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # pygame without a display
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("MUJOCO_GL", "egl")  # Half-Cheetah: MuJoCo's headless OpenGL
     # rl_zoo3.record_video is a script (its code runs under `if __name__ == "__main__"`).
     _run_with_argv("sb3-denfac-zoo record_video", argv, lambda: runpy.run_module("rl_zoo3.record_video", run_name="__main__"))
 

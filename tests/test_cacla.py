@@ -152,7 +152,6 @@ def test_several_envs_and_save_load(tmp_path):
     assert loaded.num_timesteps == 80
 
 
-@pytest.mark.filterwarnings("ignore:rich is experimental")
 def test_tensorboard_callbacks_logs(tmp_path):
     class Count(BaseCallback):
         def __init__(self):

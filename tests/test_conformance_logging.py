@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pathlib
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3.common.callbacks import (
@@ -140,8 +141,23 @@ def test_stop_on_max_episodes(name: str) -> None:
     assert model.num_timesteps == 2 * EPISODE
 
 
+@pytest.mark.filterwarnings("error::tqdm.TqdmExperimentalWarning")
 @pytest.mark.parametrize("name", ALGOS)
 def test_progress_bar(name: str) -> None:
+    """SB3's progress bar, without tqdm's "rich is experimental" warning."""
     model = make_model(name)
     model.learn(2 * EPISODE, progress_bar=True)
     assert model.num_timesteps == 2 * EPISODE
+
+
+def test_progress_bar_counts_episodes_when_budgeted_in_episodes() -> None:
+    """Episodes that end early (CartPole failures) still fill a bar budgeted in episodes."""
+    from sb3_denfac.common.callbacks import ProgressBarCallback
+
+    horizon = 5 * EPISODE
+    env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, random_start=True)
+    model = make_model("denfac", env=env, buffer_size=4 * horizon, seed=0)
+    bar = ProgressBarCallback(max_episodes=3)
+    model.learn(3 * horizon, callback=[StopTrainingOnMaxEpisodes(max_episodes=3), bar])
+    assert model.num_timesteps < 3 * horizon, "the test needs episodes that end early"
+    assert bar.pbar.n == bar.pbar.total == 3

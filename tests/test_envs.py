@@ -209,6 +209,23 @@ def test_acrobot_timeout_from_inner_time_limit_and_gym_make() -> None:
     assert reward > 0 and reward == pytest.approx(info["max_tip_height"])
 
 
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_gym_make_max_episode_steps_alone_sets_the_episode_length(env_id: str) -> None:
+    """gym.make(id, max_episode_steps=N) without episode_length: the env's own counter follows, so the N-th step is
+    its last one (the paper's last-step reward, paper_performance)."""
+    env = gym.make(env_id, max_episode_steps=9)
+    assert env.unwrapped.episode_length == 9 and env.spec.max_episode_steps == 9
+    env.reset(seed=0)
+    infos = [env.step(zero_action(env))[4] for _ in range(9)]
+    assert "paper_performance" in infos[-1] and not any("paper_performance" in info for info in infos[:-1])
+    if env_id == ACROBOT:
+        assert infos[-1]["paper_performance"] == 9  # goal not reached: the episode length
+    assert gym.make(env_id, max_episode_steps=9, episode_length=5).unwrapped.episode_length == 5  # ends first: allowed
+    with pytest.raises(ValueError, match=r"episode_length=12 is longer than the TimeLimit.*max_episode_steps=9"):
+        gym.make(env_id, max_episode_steps=9, episode_length=12)
+    assert gym.make(env_id).unwrapped.episode_length == 500
+
+
 def test_acrobot_goal_reachable_with_default_torque() -> None:
     # Bang-bang energy pumping a = sign(dtheta2) reaches the straight-up goal within 500 steps.
     env = gym.make(ACROBOT)

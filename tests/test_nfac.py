@@ -134,7 +134,7 @@ def test_actor_update_moves_only_toward_selected_actions():
 def test_rollout_stores_truncation_and_termination():
     for terminate in (False, True):
         model = NFAC("MlpPolicy", TargetEnv(ep_len=5, terminate=terminate), n_episodes=2, seed=0)
-        model.learn(1)  # one rollout of 2 episodes, then one update
+        model.learn(10)  # one rollout of two 5-step episodes, then one update
         data = model.rollout_buffer.get(model.device)
         assert len(data.rewards) == 10
         expected = np.zeros(10)
@@ -183,7 +183,6 @@ def test_save_load_exact(tmp_path):
     assert loaded.num_timesteps >= 80
 
 
-@pytest.mark.filterwarnings("ignore:rich is experimental")
 def test_tensorboard_callbacks_progress_bar(tmp_path):
     class Count(BaseCallback):
         def __init__(self):
@@ -250,8 +249,12 @@ def test_bad_hyperparameters(kwargs, name):
 def test_unsupported_spaces_and_several_envs():
     with pytest.raises(ValueError, match="Box"):
         NFAC("MlpPolicy", "CartPole-v1")
-    with pytest.raises(ValueError, match="n_envs"):
-        NFAC("MlpPolicy", make_vec_env(TargetEnv, n_envs=2))
+    # Several envs: the rollout ends once n_episodes episodes have ended in all, and holds every env's transitions.
+    model = NFAC("MlpPolicy", make_vec_env(TargetEnv, n_envs=2, env_kwargs=dict(ep_len=5)), n_episodes=2, seed=0)
+    model.learn(10)
+    assert model.num_timesteps == 10 and model._n_updates == 1
+    data = model.rollout_buffer.get(model.device)
+    assert len(data.rewards) == 10
 
 
 def test_options_and_numpy_hyperparameters():

@@ -1,6 +1,7 @@
 """The README's main job (sb3_denfac.quickstart) end to end on a tiny budget."""
 
 import numpy as np
+import pytest
 from stable_baselines3.common.monitor import load_results
 
 from sb3_denfac import DENFAC
@@ -24,4 +25,34 @@ def test_quickstart_writes_model_logs_and_plot(tmp_path, capsys):
     assert list((run_dir / "tensorboard").rglob("events.out.tfevents.*"))
     model = DENFAC.load(run_dir / "model.zip")
     assert model.num_timesteps == monitor["l"].sum()
-    assert str(run_dir / "learning_curve.png") in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert str(run_dir / "learning_curve.png") in out
+    # The policy of the best episode is kept, and the output says why it matters.
+    best = DENFAC.load(run_dir / "best_model.zip")
+    best_episode = summary["best_episode"]
+    assert monitor["paper_performance"].iloc[best_episode - 1] == summary["best_training_performance"]
+    assert best.num_timesteps == monitor["l"].iloc[:best_episode].sum()  # saved at the end of that episode
+    assert "best_model.zip" in out and "not monotone" in out
+    assert np.isfinite(summary["best_model_deterministic_performance"])
+
+
+def test_quickstart_on_an_env_outside_the_paper(tmp_path):
+    """Envs without info["paper_performance"]: the episode return is plotted and reported."""
+    summary = main(["--env", "Pendulum-v1", "--episodes", "2", "--log-dir", str(tmp_path)])
+    run_dir = tmp_path / "denfac_Pendulum-v1_seed0"
+    monitor = load_results(str(run_dir))
+    assert summary["episodes"] == 2 and summary["best_training_performance"] == monitor["r"].max()
+    assert (run_dir / "learning_curve.png").stat().st_size > 1000
+    assert (run_dir / "best_model.zip").is_file() and np.isfinite(summary["final_deterministic_performance"])
+
+
+@pytest.mark.parametrize(("env_id", "close"), [("NoSuchEnv-v0", None), ("Pendulm-v1", "Pendulum-v1")])
+def test_quickstart_unknown_env_id(tmp_path, capsys, env_id, close):
+    """One line naming the id (and the registered ids close to it), a non-zero exit code, and nothing written."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--env", env_id, "--log-dir", str(tmp_path / "runs")])
+    assert exit_info.value.code != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and repr(env_id) in err
+    assert close is None or close in err
+    assert not (tmp_path / "runs").exists()

@@ -19,7 +19,6 @@ from sb3_denfac.common.networks import has_batch_norm
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
-    refresh_bn_statistics,
     td_targets,
 )
 
@@ -134,7 +133,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
     def refresh_bn_statistics(self) -> None:
         """Move the running statistics of every BN layer toward those of the states of the last ``bn_window`` steps."""
         states = th.as_tensor(np.concatenate(self._bn_states), device=self.device)
-        refresh_bn_statistics([self.policy.actor, self.policy.critic], self.policy.features(states))
+        self.policy.refresh_bn_statistics(states)
 
     def _on_step_transition(self, transitions: Transitions) -> None:
         """One CACLA update on the transition(s) of the last step (BN in eval mode, see the class docstring)."""
@@ -149,13 +148,13 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         values = self.policy.predict_values(transitions.observations).flatten()
         positive = (targets - values.detach()) > 0  # delta computed with V_old, before the critic step
         critic_loss = F.mse_loss(values, targets)
-        self._gradient_step(critic_loss, self.policy.critic, self.policy.critic_optimizer)
+        self._gradient_step(critic_loss, self.policy.critic_optimizer)
         self._step_stats["critic_loss"].append(critic_loss.item())
         self._step_stats["positive"].append(positive.float().mean().item())
         if positive.any():
             means = self.policy.actor_mean(transitions.observations[positive])
             actor_loss = F.mse_loss(means, transitions.actions[positive])
-            self._gradient_step(actor_loss, self.policy.actor, self.policy.actor_optimizer)
+            self._gradient_step(actor_loss, self.policy.actor_optimizer)
             self._step_stats["actor_loss"].append(actor_loss.item())
         self._step_stats["time"].append(time.perf_counter() - start)
 

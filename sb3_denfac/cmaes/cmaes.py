@@ -19,6 +19,8 @@ from stable_baselines3.common.utils import safe_mean
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
+from sb3_denfac.common.budget import budget_reached
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -37,7 +39,7 @@ class _Randn:
         return self.rng.standard_normal(shape)
 
 
-class CMAES(InputChecksMixin, BaseAlgorithm):
+class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
     """CMA-ES over the weights of the actor network, the actor-only baseline of the DENFAC paper.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4: CMA-ES (Hansen
@@ -48,10 +50,11 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
 
     The evaluation episodes are the training data: every environment step counts in ``num_timesteps`` and calls the
     callbacks (EvalCallback, progress bar, best-so-far callbacks work), Monitor episodes fill ``rollout/ep_rew_mean``.
-    ``learn(n)`` stops at the first candidate boundary after n steps (a candidate's episodes are never cut short,
-    unless a callback stops training); an unfinished generation is kept and resumed by the next
-    ``learn(reset_num_timesteps=False)``, as is the whole CMA-ES state. cma's termination criteria are ignored: the
-    budget is ``total_timesteps``.
+    ``learn(n)`` stops after n steps, also inside an episode (an env without time limit does not hang): the unfinished
+    candidate evaluation and generation are kept and resumed by the next ``learn(reset_num_timesteps=False)``, which
+    continues the same episode, so a candidate is always scored on whole episodes. When the env is reset in between
+    (``reset_num_timesteps=True``, ``load``, a callback that stopped training), the interrupted episode is restarted.
+    cma's termination criteria are ignored: the budget is ``total_timesteps``.
 
     Exploration: candidates act deterministically by default (``sigma=0``, the usual CMA-ES policy search, which
     explores in parameter space). ``sigma > 0`` adds the paper's truncated Gaussian action noise N(mu(s), sigma^2) on
@@ -66,7 +69,9 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
     the best candidate and its return, and the generation count.
 
     Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
-    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
+    a ValueError, ``load`` refuses corrupted zips and zips saved by another algorithm, and an action space that is not
+    a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a ValueError that is
+    also SB3's AssertionError).
 
     :param policy: policy class or "MlpPolicy" (:class:`sb3_denfac.cmaes.policies.CMAESPolicy`; policy_kwargs:
         ``net_arch``, ``batch_norm`` (default False), ``init``, ``activation_fn``)
@@ -144,6 +149,8 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
         self.best_params: np.ndarray | None = None
         self._candidates: list[np.ndarray] | None = None
         self._candidate_returns: list[float] = []
+        self._episode_returns: list[float] = []  # finished evaluation episodes of the current candidate
+        self._episode_return = 0.0  # return so far of the episode being evaluated
         self._episode_num = 0
         if _init_setup_model:
             self._setup_model()
@@ -186,20 +193,22 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
         return self.policy.unscale_action(scaled)
 
     def _evaluate_candidate(self, flat: np.ndarray, callback: BaseCallback) -> float | None:
-        """Run ``n_eval_episodes`` episodes with candidate ``flat``; None if a callback stopped training."""
+        """Run candidate ``flat``'s remaining evaluation episodes; its mean return, or None if training stops first
+        (a callback, or ``total_timesteps`` reached: the evaluation is then resumed by the next ``learn``)."""
         assert self.env is not None
         self._load_parameters(self._candidate_policy, flat)
         callback.on_rollout_start()
-        returns = []
-        for _ in range(self.n_eval_episodes):
-            episode_return, done = 0.0, False
+        while len(self._episode_returns) < self.n_eval_episodes:
+            done = False
             while not done:
+                if budget_reached(self):
+                    return None
                 actions = self._act(self._last_obs)  # type: ignore[arg-type]
                 new_obs, rewards, dones, infos = self.env.step(actions)
                 if self._vec_normalize_env is not None:
                     rewards = self._vec_normalize_env.get_original_reward()
                 self.num_timesteps += 1
-                episode_return += float(rewards[0])
+                self._episode_return += float(rewards[0])
                 done = bool(dones[0])
                 self._update_info_buffer(infos, dones)
                 self._last_obs = new_obs  # after a done, VecEnv has already reset: the next episode's first obs
@@ -207,11 +216,19 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
                 if not callback.on_step():
                     if not done:
                         self._last_obs = None  # type: ignore[assignment]  # the next learn() resets the env
+                    else:
+                        self._end_episode()
                     return None
-            self._episode_num += 1
-            returns.append(episode_return)
+            self._end_episode()
         callback.on_rollout_end()
-        return float(np.mean(returns))
+        mean_return = float(np.mean(self._episode_returns))
+        self._episode_returns = []
+        return mean_return
+
+    def _end_episode(self) -> None:
+        self._episode_num += 1
+        self._episode_returns.append(self._episode_return)
+        self._episode_return = 0.0
 
     def _end_generation(self) -> None:
         """Tell cma the returns of the finished generation, update the best candidate and the incumbent policy."""
@@ -255,6 +272,8 @@ class CMAES(InputChecksMixin, BaseAlgorithm):
         progress_bar: bool = False,
     ) -> SelfCMAES:
         """Run CMA-ES generations until ``total_timesteps`` environment steps; logs every ``log_interval`` generations."""
+        if reset_num_timesteps or self._last_obs is None:
+            self._episode_return = 0.0  # the env is reset: an interrupted episode restarts
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )

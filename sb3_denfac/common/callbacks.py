@@ -1,12 +1,17 @@
-"""Callbacks for measuring data-efficiency the way the paper does (best registered performance per episode)."""
+"""Callbacks for measuring data-efficiency the way the paper does (best registered performance per episode), and the
+progress bar of ``learn(progress_bar=True)``."""
 
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
+from stable_baselines3.common.callbacks import ProgressBarCallback as SB3ProgressBarCallback
+from stable_baselines3.common.type_aliases import MaybeCallback
+from tqdm import TqdmExperimentalWarning
 
 
 class EpisodePerformanceCallback(BaseCallback):
@@ -31,6 +36,9 @@ class EpisodePerformanceCallback(BaseCallback):
     :param lower_is_better: whether a lower measure is better (Acrobot), for the running best.
     :param fallback_to_return: if the info has no ``performance_key``, use the episode return instead of NaN
         (lets the callback run on any Gymnasium env).
+    :param best_model_path: if given, ``model.save(best_model_path)`` at the end of every episode whose performance is
+        a new best: the policy that played it (the authors' "best of stored policies"; for CMA-ES, the candidate that was
+        evaluated). With several envs, the policy at the end of the episode.
     :param verbose: verbosity level: 0 silent, 1 prints one line per episode.
     """
 
@@ -40,6 +48,7 @@ class EpisodePerformanceCallback(BaseCallback):
         performance_key: str = "paper_performance",
         lower_is_better: bool = False,
         fallback_to_return: bool = True,
+        best_model_path: str | None = None,
         verbose: int = 0,
     ):
         super().__init__(verbose=verbose)
@@ -49,6 +58,7 @@ class EpisodePerformanceCallback(BaseCallback):
         self.performance_key = performance_key
         self.lower_is_better = lower_is_better
         self.fallback_to_return = fallback_to_return
+        self.best_model_path = best_model_path
         self.records: list[dict[str, Any]] = []
         self._start_time = 0.0
         self._returns = np.zeros(0)
@@ -115,6 +125,8 @@ class EpisodePerformanceCallback(BaseCallback):
             "wall_time": time.perf_counter() - self._start_time,
         }
         self.records.append(record)
+        if self.best_model_path is not None and not np.isnan(performance) and (np.isnan(previous) or best != previous):
+            self._save_acting_policy()
         self.logger.record("rollout/paper_performance", performance)
         self.logger.record("rollout/best_paper_performance", best)
         if self.verbose >= 1:
@@ -122,3 +134,56 @@ class EpisodePerformanceCallback(BaseCallback):
                 f"episode {record['episode']}: performance={performance:.4g} best={best:.4g} "
                 f"return={ep_return:.4g} length={ep_length} timesteps={record['timesteps']}"
             )
+
+    def _save_acting_policy(self) -> None:
+        candidate = getattr(self.model, "_candidate_policy", None)  # CMA-ES plays candidates, not model.policy
+        if candidate is None:
+            self.model.save(self.best_model_path)
+            return
+        incumbent = {key: value.clone() for key, value in self.model.policy.state_dict().items()}
+        self.model.policy.load_state_dict(candidate.state_dict())
+        try:
+            self.model.save(self.best_model_path)
+        finally:
+            self.model.policy.load_state_dict(incumbent)
+
+
+class ProgressBarCallback(SB3ProgressBarCallback):
+    """SB3's progress bar (tqdm.rich) without tqdm's "rich is experimental" ``TqdmExperimentalWarning``.
+
+    :param max_episodes: count finished episodes up to this number instead of steps, for a run budgeted in episodes
+        (e.g. with ``StopTrainingOnMaxEpisodes``): the bar then reaches 100% even when episodes end early.
+    """
+
+    def __init__(self, max_episodes: int | None = None) -> None:
+        super().__init__()
+        if max_episodes is not None and max_episodes < 1:
+            raise ValueError(f"max_episodes must be None or >= 1, got {max_episodes}")
+        self.max_episodes = max_episodes
+
+    def _on_training_start(self) -> None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TqdmExperimentalWarning)
+            if self.max_episodes is None:
+                super()._on_training_start()
+            else:
+                from tqdm.rich import tqdm
+
+                self.pbar = tqdm(total=self.max_episodes, unit="episode")
+
+    def _on_step(self) -> bool:
+        if self.max_episodes is None:
+            return super()._on_step()
+        self.pbar.update(int(np.sum(self.locals["dones"])))
+        return True
+
+
+class ProgressBarMixin:
+    """``learn(progress_bar=True)`` shows :class:`ProgressBarCallback` instead of SB3's (same bar, no warning)."""
+
+    def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
+        if progress_bar:
+            callbacks = callback if isinstance(callback, list) else [] if callback is None else [callback]
+            callbacks = [c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in callbacks]
+            callback = CallbackList([*callbacks, ProgressBarCallback()])
+        return super()._init_callback(callback, progress_bar=False)  # type: ignore[misc]

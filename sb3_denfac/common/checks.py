@@ -5,6 +5,8 @@
   naming which (``found nan in rewards``, ``found inf in observations``...) instead of silently turning the networks'
   weights into NaN. In-process envs get a gym-level :class:`FiniteCheckWrapper` per sub-env, other VecEnvs SB3's
   :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True`` (see :func:`wrap_check_finite`).
+  The same hook refuses an action space that is not a Box with finite bounds with an :class:`UnsupportedSpaceError`
+  (a ``ValueError`` that is also an ``AssertionError``, SB3's type for unsupported spaces).
 - :class:`ModelFileCheckMixin` makes ``load`` refuse, with a ``ValueError`` naming the problem, a truncated or corrupted
   model zip (SB3 itself only asserts "No data found") and a zip that another algorithm saved (e.g. a TD3 zip given to
   ``DENFAC.load``, which SB3 would let fail somewhere inside ``_setup_model``).
@@ -106,6 +108,21 @@ def wrap_check_finite(env: VecEnv) -> VecEnv:
     return VecCheckNan(env, raise_exception=True, warn_once=False, check_inf=True)
 
 
+class UnsupportedSpaceError(ValueError, AssertionError):
+    """An action space the algorithm cannot use. A ``ValueError`` naming the space and what is needed; also an
+    ``AssertionError``, which SB3 raises for unsupported spaces, so code written for SB3 (``except AssertionError``,
+    ``pytest.raises(AssertionError)``) keeps working."""
+
+
+def check_action_space(algorithm: str, space: spaces.Space) -> None:
+    """Raise an :class:`UnsupportedSpaceError` unless ``space`` is a Box with finite bounds (all of the package's
+    algorithms scale actions to [-1, 1])."""
+    if not isinstance(space, spaces.Box):
+        raise UnsupportedSpaceError(f"{algorithm} needs a continuous (gymnasium.spaces.Box) action space, got {space}")
+    if not (np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high))):
+        raise UnsupportedSpaceError(f"{algorithm} needs finite action bounds (actions are scaled to [-1, 1]), got {space}")
+
+
 class FiniteInputsMixin:
     """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (:func:`wrap_check_finite`), see module doc.
 
@@ -116,6 +133,7 @@ class FiniteInputsMixin:
     @classmethod
     def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
         wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
+        check_action_space(cls.__name__, wrapped.action_space)  # before SB3's own assert (one error type for all)
         return wrap_check_finite(wrapped)
 
 

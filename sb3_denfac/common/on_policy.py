@@ -18,6 +18,7 @@ is then well defined, and the function that is fitted is exactly the one that co
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
@@ -33,6 +34,7 @@ from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_positive
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
@@ -45,7 +47,7 @@ class DeterministicActorValuePolicy(BasePolicy):
     layer but the last, i.e. "except on the last two layers"). ``predict(deterministic=True)`` returns mu(s) clipped to
     the action bounds; ``deterministic=False`` samples the truncated Gaussian exploration policy.
 
-    :param observation_space: observation space (Box or Discrete).
+    :param observation_space: observation space (Box, Discrete, MultiDiscrete or MultiBinary: SB3's preprocessing).
     :param action_space: Box action space with finite bounds.
     :param lr_schedule: actor learning rate alpha_a (schedule of the remaining progress).
     :param critic_lr_schedule: critic learning rate alpha_c; defaults to ``lr_schedule``.
@@ -61,6 +63,8 @@ class DeterministicActorValuePolicy(BasePolicy):
     :param normalize_images: SB3 image normalisation flag.
     :param optimizer_class: optimiser of both networks (default Adam).
     :param optimizer_kwargs: its keyword arguments, except the learning rate.
+    :param share_features_extractor: one features extractor for actor and critic (trained by both optimisers, as SB3's
+        ActorCriticPolicy), else one each (``features_extractor`` is the actor's, ``vf_features_extractor`` the critic's).
     """
 
     def __init__(
@@ -80,6 +84,7 @@ class DeterministicActorValuePolicy(BasePolicy):
         normalize_images: bool = True,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
+        share_features_extractor: bool = True,
     ):
         super().__init__(
             observation_space,
@@ -104,7 +109,10 @@ class DeterministicActorValuePolicy(BasePolicy):
         self.bn_momentum = bn_momentum
         self.init = init
 
+        # As SB3's ActorCriticPolicy: a shared extractor is trained by both optimisers, else each network has its own.
+        self.share_features_extractor = share_features_extractor
         self.features_extractor = self.make_features_extractor()
+        self.vf_features_extractor = self.features_extractor if share_features_extractor else self.make_features_extractor()
         features_dim = self.features_extractor.features_dim
         mlp_kwargs = dict(batch_norm=batch_norm, activation_fn=activation_fn, bn_momentum=bn_momentum, init=init)
         self.actor = create_bn_mlp(features_dim, get_action_dim(action_space), pi_arch, **mlp_kwargs)
@@ -112,11 +120,20 @@ class DeterministicActorValuePolicy(BasePolicy):
 
         self.lr_schedule = lr_schedule
         self.critic_lr_schedule = critic_lr_schedule or lr_schedule
-        self.actor_optimizer = self._make_optimizer(self.actor, lr_schedule)
-        self.critic_optimizer = self._make_optimizer(self.critic, self.critic_lr_schedule)
+        self.actor_optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
+        self.critic_optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
 
-    def _make_optimizer(self, net: nn.Module, schedule: Schedule) -> th.optim.Optimizer:
-        return self.optimizer_class(net.parameters(), lr=schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+    def actor_modules(self) -> list[nn.Module]:
+        """mu(s) as trained by the actor optimiser: its features extractor and MLP."""
+        return [self.features_extractor, self.actor]
+
+    def critic_modules(self) -> list[nn.Module]:
+        """V(s) as trained by the critic optimiser: its features extractor and MLP."""
+        return [self.vf_features_extractor, self.critic]
+
+    def _make_optimizer(self, modules: list[nn.Module], schedule: Schedule) -> th.optim.Optimizer:
+        params = [p for module in modules for p in module.parameters()]
+        return self.optimizer_class(params, lr=schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
@@ -134,26 +151,39 @@ class DeterministicActorValuePolicy(BasePolicy):
                 features_extractor_kwargs=self.features_extractor_kwargs,
                 optimizer_class=self.optimizer_class,
                 optimizer_kwargs=self.optimizer_kwargs,
+                share_features_extractor=self.share_features_extractor,
             )
         )
         return data
 
     def reset_critic(self) -> None:
-        """Re-initialise V (weights and batch-norm statistics) and its optimiser state (NFAC's ``reset_critic``)."""
+        """Re-initialise V's MLP (weights and batch-norm statistics) and the critic optimiser state (NFAC's
+        ``reset_critic``); a custom features extractor keeps its weights."""
         lr = self.critic_optimizer.param_groups[0]["lr"]
         reset_parameters_(self.critic, self.init)
-        self.critic_optimizer = self.optimizer_class(self.critic.parameters(), lr=lr, **self.optimizer_kwargs)  # type: ignore[call-arg]
-
-    def features(self, obs: PyTorchObs) -> th.Tensor:
-        return self.extract_features(obs, self.features_extractor)
+        self.critic_optimizer = self._make_optimizer(self.critic_modules(), lambda _: lr)
 
     def actor_mean(self, obs: PyTorchObs) -> th.Tensor:
         """mu(s): unbounded actor output in the scaled action space (the behaviour mean of the exploration)."""
-        return self.actor(self.features(obs))
+        return self.actor(self.extract_features(obs, self.features_extractor))
 
     def predict_values(self, obs: PyTorchObs) -> th.Tensor:
         """V(s), shape (batch, 1)."""
-        return self.critic(self.features(obs))
+        return self.critic(self.extract_features(obs, self.vf_features_extractor))
+
+    @th.no_grad()
+    def refresh_bn_statistics(self, obs: PyTorchObs, exact_when_fresh: bool = False, critic_only: bool = False) -> None:
+        """Move the running statistics of the BN layers (features extractors included) toward those of ``obs`` by one
+        gradient-free train-mode forward; see :func:`refresh_bn_statistics`. Needs at least two observations."""
+        modules = self.critic_modules() if critic_only else [*self.actor_modules(), *self.critic_modules()]
+        modules = list(dict.fromkeys(modules))  # a shared extractor once
+
+        def forward() -> None:
+            self.predict_values(obs)
+            if not critic_only:
+                self.actor_mean(obs)
+
+        refresh_bn_statistics(modules, forward, len(obs), exact_when_fresh)  # type: ignore[arg-type]
 
     def forward(self, obs: PyTorchObs, deterministic: bool = False) -> th.Tensor:
         return self._predict(obs, deterministic=deterministic)
@@ -170,26 +200,32 @@ class DeterministicActorValuePolicy(BasePolicy):
 
 
 @th.no_grad()
-def refresh_bn_statistics(nets: list[nn.Module], inputs: th.Tensor, exact_when_fresh: bool = False) -> None:
-    """Update the running statistics of the BN layers of ``nets`` with one gradient-free train-mode forward of ``inputs``.
+def refresh_bn_statistics(
+    modules: list[nn.Module], forward: Callable[[], Any], n_inputs: int, exact_when_fresh: bool = False
+) -> None:
+    """Update the running statistics of the BN layers of ``modules`` with ``forward()`` run once in BN train mode.
 
-    The statistics move toward those of ``inputs`` with each layer's momentum; with ``exact_when_fresh``, a layer that
-    has never seen a batch (new or re-initialised network) takes them as they are. Needs at least two inputs.
+    The statistics move toward those of the forwarded batch with each layer's momentum; with ``exact_when_fresh``, a
+    layer that has never seen a batch (new or re-initialised network) takes them as they are. Needs ``n_inputs`` >= 2.
     """
-    if len(inputs) < 2:
+    if n_inputs < 2:
         return
-    for net in nets:
-        fresh = [
-            m
-            for m in net.modules()
-            if exact_when_fresh and isinstance(m, nn.modules.batchnorm._BatchNorm) and m.num_batches_tracked == 0
-        ]
-        momenta = [m.momentum for m in fresh]
-        for layer in fresh:
-            layer.momentum = 1.0
-        set_bn_training_mode(net, True)
-        net(inputs)
-        set_bn_training_mode(net, False)
+    fresh = [
+        m
+        for module in modules
+        for m in module.modules()
+        if exact_when_fresh and isinstance(m, nn.modules.batchnorm._BatchNorm) and m.num_batches_tracked == 0
+    ]
+    momenta = [m.momentum for m in fresh]
+    for layer in fresh:
+        layer.momentum = 1.0
+    for module in modules:
+        set_bn_training_mode(module, True)
+    try:
+        forward()
+    finally:
+        for module in modules:
+            set_bn_training_mode(module, False)
         for layer, momentum in zip(fresh, momenta, strict=True):
             layer.momentum = momentum
 
@@ -236,11 +272,13 @@ class TransitionBuffer:
         )
 
 
-class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
-    corrupted or foreign model files raise a ValueError (:class:`~sb3_denfac.common.checks.InputChecksMixin`).
+    corrupted or foreign model files raise a ValueError (:class:`~sb3_denfac.common.checks.InputChecksMixin`), and an
+    action space that is not a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError`
+    (a ValueError that is also SB3's AssertionError).
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 
@@ -305,25 +343,13 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
             seed=seed,
             device=device,
             _init_setup_model=False,
-            supported_action_spaces=None,  # checked below with a ValueError
+            supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
         )
         self.actor_learning_rate = rates["actor_learning_rate"]
         self.critic_learning_rate = rates["critic_learning_rate"]
         self.sigma = sigma
-        if self.env is not None:  # load() builds the model without an env
-            self._check_spaces()
         if _init_setup_model:
             self._setup_model()
-
-    def _check_spaces(self) -> None:
-        name = type(self).__name__
-        space = self.action_space
-        if not isinstance(space, spaces.Box):
-            raise ValueError(f"{name} needs a continuous (gymnasium.spaces.Box) action space, got {space}")
-        if not (np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high))):
-            raise ValueError(f"{name} needs finite action bounds (truncated Gaussian exploration), got {space}")
-        if not isinstance(self.observation_space, (spaces.Box, spaces.Discrete)):
-            raise ValueError(f"{name} supports Box or Discrete observation spaces, got {self.observation_space}")
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
@@ -354,11 +380,12 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, OnPolicyAlgorithm):
         update_learning_rate(self.policy.actor_optimizer, self.actor_lr_schedule(progress))
         update_learning_rate(self.policy.critic_optimizer, self.critic_lr_schedule(progress))
 
-    def _gradient_step(self, loss: th.Tensor, net: nn.Module, optimizer: th.optim.Optimizer) -> None:
+    def _gradient_step(self, loss: th.Tensor, optimizer: th.optim.Optimizer) -> None:
+        """One step of ``optimizer`` (actor or critic, features extractor included) on ``loss``, norm-clipped."""
         optimizer.zero_grad()
         loss.backward()
         if self.max_grad_norm is not None:
-            th.nn.utils.clip_grad_norm_(net.parameters(), self.max_grad_norm)
+            th.nn.utils.clip_grad_norm_([p for group in optimizer.param_groups for p in group["params"]], self.max_grad_norm)
         optimizer.step()
 
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:

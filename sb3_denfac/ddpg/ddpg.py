@@ -14,6 +14,8 @@ from stable_baselines3.common.utils import FloatSchedule, polyak_update, update_
 from stable_baselines3.ddpg import DDPG as SB3DDPG
 from torch.nn import functional as F
 
+from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
@@ -21,7 +23,7 @@ from sb3_denfac.common.networks import set_bn_training_mode
 from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
 
 
-class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
+class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
     """Deep Deterministic Policy Gradient (Lillicrap et al. 2016) in the configuration the DENFAC paper compares with.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4, Figure 5: DDPG with
@@ -35,7 +37,9 @@ class DDPG(InputChecksMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
     outputs back; targets and executed actions use the actor output clamped to [-1, 1].
 
     Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations, rewards or actions raise
-    a ValueError, and ``load`` refuses corrupted zips and zips saved by another algorithm.
+    a ValueError, ``load`` refuses corrupted zips and zips saved by another algorithm, and an action space that is not
+    a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a ValueError that is
+    also SB3's AssertionError).
 
     Differences from SB3's DDPG: networks and exploration above; separate actor and critic learning rates (alpha_a,
     alpha_c); with ``batch_norm=False``, ``init="default"``, ``activation_fn=nn.ReLU``, a tanh actor and ``sigma=None`` it

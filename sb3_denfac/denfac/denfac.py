@@ -9,7 +9,6 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
@@ -17,6 +16,8 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import update_learning_rate
 
+from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
+from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
@@ -32,7 +33,9 @@ WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
 UPDATE_PATHS = ("auto", "fast", "plain")
 
 
-class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
+class DENFAC(
+    InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm
+):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
     Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
@@ -78,8 +81,12 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
     - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
     - Importance weights below sqrt(float32's smallest normal) are exactly 0 (subnormal arithmetic is many times
       slower; their contribution is below float32's resolution).
+    - Budget: ``learn(total_timesteps)`` stops at ``total_timesteps``, also inside an episode, and then updates on the
+      buffer as it is (the unfinished episode bootstraps); see :mod:`sb3_denfac.common.budget`.
     - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
-      ValueError, and ``load`` refuses corrupted zips and zips or replay buffers of another algorithm.
+      ValueError, ``load`` refuses corrupted zips and zips or replay buffers of another algorithm, and an action space
+      that is not a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a
+      ValueError that is also SB3's AssertionError).
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -199,11 +206,9 @@ class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgor
             device=device,
             seed=seed,
             sde_support=False,
-            supported_action_spaces=None,  # checked below with a clear message
+            supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
             support_multi_env=True,  # checked below with a clear message
         )
-        if getattr(self, "action_space", None) is not None and not isinstance(self.action_space, spaces.Box):
-            raise ValueError(f"DENFAC needs a continuous (Box) action space, got {self.action_space}")
         if self.env is not None and self.n_envs != 1:
             raise ValueError(
                 f"DENFAC updates at the end of every episode and needs a single environment, got n_envs={self.n_envs}"

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium
+from gymnasium.envs.registration import WrapperSpec
 
 from sb3_denfac.envs.acrobot import (
     AcrobotSwingUpReward,
@@ -24,7 +25,13 @@ from sb3_denfac.envs.acrobot import (
     acrobot_tip_height,
 )
 from sb3_denfac.envs.cartpole import CartPoleBalanceReward, ContinuousCartPoleEnv, ContinuousCartPolePaperEnv
-from sb3_denfac.envs.common import PAPER_PERFORMANCE_KEY, EpisodeRewardWrapper, PaperEnv
+from sb3_denfac.envs.common import (
+    DEFAULT_EPISODE_LENGTH,
+    PAPER_PERFORMANCE_KEY,
+    EpisodeLengthFromTimeLimit,
+    EpisodeRewardWrapper,
+    PaperEnv,
+)
 
 ENV_IDS = (
     "sb3_denfac/ContinuousAcrobot-v0",
@@ -37,6 +44,10 @@ _ENTRY_POINTS = (
     "sb3_denfac.envs.half_cheetah:HalfCheetahPaperEnv",
 )
 
+#: Added by gym.make outside the TimeLimit: the env takes max_episode_steps as its episode length.
+_EPISODE_LENGTH_WRAPPER = WrapperSpec(
+    name="EpisodeLengthFromTimeLimit", entry_point="sb3_denfac.envs.common:EpisodeLengthFromTimeLimit", kwargs={}
+)
 
 _HALF_CHEETAH_NAMES = (
     "HalfCheetahContactEnv",
@@ -60,7 +71,12 @@ def register_envs() -> None:
     """Register the paper's environments with Gymnasium (idempotent)."""
     for env_id, entry_point in zip(ENV_IDS, _ENTRY_POINTS, strict=True):
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point=entry_point, max_episode_steps=500)
+            gymnasium.register(
+                id=env_id,
+                entry_point=entry_point,
+                max_episode_steps=DEFAULT_EPISODE_LENGTH,
+                additional_wrappers=(_EPISODE_LENGTH_WRAPPER,),
+            )
 
 
 __all__ = [
@@ -72,6 +88,7 @@ __all__ = [
     "CartPoleBalanceReward",
     "ContinuousCartPoleEnv",
     "ContinuousCartPolePaperEnv",
+    "EpisodeLengthFromTimeLimit",
     "EpisodeRewardWrapper",
     "HalfCheetahContactEnv",
     "HalfCheetahPaperEnv",

@@ -17,7 +17,7 @@ from gymnasium import spaces
 from gymnasium.envs.classic_control import utils
 from gymnasium.envs.classic_control.acrobot import AcrobotEnv, bound, rk4, wrap
 
-from sb3_denfac.envs.common import EpisodeRewardWrapper, PaperEnv, as_action_vector
+from sb3_denfac.envs.common import DEFAULT_EPISODE_LENGTH, EpisodeRewardWrapper, PaperEnv, as_action_vector
 
 OBS_TYPES = ("paper", "gymnasium")
 
@@ -167,11 +167,12 @@ class ContinuousAcrobotPaperEnv(PaperEnv):
         self,
         max_torque: float = 1.5,
         goal_height: float = 0.99,
-        episode_length: int = 500,
+        episode_length: int | None = None,
         random_start: bool = False,
         obs_type: str = "paper",
         n_substeps: int = 1,
         render_mode: str | None = None,
     ) -> None:
         base = ContinuousAcrobotEnv(max_torque, random_start, obs_type, n_substeps, render_mode)
-        super().__init__(AcrobotSwingUpReward(base, goal_height, episode_length))
+        length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
+        super().__init__(AcrobotSwingUpReward(base, goal_height, length), episode_length_given=episode_length is not None)

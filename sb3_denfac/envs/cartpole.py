@@ -19,7 +19,7 @@ from gymnasium import spaces
 from gymnasium.envs.classic_control import utils
 from gymnasium.envs.classic_control.cartpole import CartPoleEnv
 
-from sb3_denfac.envs.common import EpisodeRewardWrapper, PaperEnv, as_action_vector
+from sb3_denfac.envs.common import DEFAULT_EPISODE_LENGTH, EpisodeRewardWrapper, PaperEnv, as_action_vector
 
 
 class ContinuousCartPoleEnv(CartPoleEnv):
@@ -172,12 +172,11 @@ class ContinuousCartPolePaperEnv(PaperEnv):
         x_threshold: float = 2.4,
         box_x: float = 0.05,
         box_theta: float = math.pi / 60,
-        episode_length: int = 500,
+        episode_length: int | None = None,
         random_start: bool = False,
         render_mode: str | None = None,
     ) -> None:
         base = ContinuousCartPoleEnv(force_mag, theta_threshold_radians, x_threshold, random_start, render_mode)
-        wrapped = CartPoleBalanceReward(
-            base, x_threshold, theta_threshold_radians, box_x, box_theta, max_episode_steps=episode_length
-        )
-        super().__init__(wrapped)
+        length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
+        wrapped = CartPoleBalanceReward(base, x_threshold, theta_threshold_radians, box_x, box_theta, max_episode_steps=length)
+        super().__init__(wrapped, episode_length_given=episode_length is not None)

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 PAPER_PERFORMANCE_KEY = "paper_performance"
+DEFAULT_EPISODE_LENGTH = 500
 
 
 class EpisodeRewardWrapper(gym.Wrapper):
@@ -74,17 +75,18 @@ class PaperEnv(gym.Env):
     includes the paper's reward (gymnasium's checker and SB3 see one raw environment). The inner chain is available as
     ``self.env`` and the dynamics env as ``self.base_env``.
 
-    Episode length: the reward wrapper counts steps itself (constructor argument ``episode_length``, default 500,
-    registered as ``max_episode_steps=500`` too). ``gym.make(id, max_episode_steps=N)`` only changes gymnasium's
-    outer ``TimeLimit``, which the env cannot see: pass ``episode_length=N`` as well, e.g.
-    ``gym.make(id, max_episode_steps=N, episode_length=N)``, or the last step misses the paper's last-step reward
-    and ``paper_performance``.
+    Episode length: the reward wrapper counts steps itself (the last step's reward and ``paper_performance`` depend on
+    it). It is ``episode_length`` if given, else the ``TimeLimit`` that ``gym.make`` puts around the env
+    (``gym.make(id, max_episode_steps=N)``, registered: 500; :class:`EpisodeLengthFromTimeLimit` passes it in), else
+    500. An ``episode_length`` longer than that ``TimeLimit`` is refused (its last step would never come).
 
     :param env: The wrapped environment (a reward wrapper around a base env).
+    :param episode_length_given: whether the user chose the episode length (else a ``TimeLimit`` may set it).
     """
 
-    def __init__(self, env: gym.Env) -> None:
+    def __init__(self, env: gym.Env, episode_length_given: bool = True) -> None:
         self.env = env
+        self.episode_length_given = episode_length_given
         self.observation_space = env.observation_space
         self.action_space = env.action_space
         self.render_mode = env.render_mode
@@ -105,6 +107,22 @@ class PaperEnv(gym.Env):
     def render(self) -> Any:
         return self.env.render()
 
+    @property
+    def episode_length(self) -> int | None:
+        return self.env.max_episode_steps  # type: ignore[attr-defined]
+
+    def set_time_limit(self, max_episode_steps: int) -> None:
+        """Take the length of an outer ``TimeLimit`` as the episode length, unless ``episode_length`` was given (then it
+        must not be longer)."""
+        if not self.episode_length_given:
+            self.env.max_episode_steps = max_episode_steps  # type: ignore[attr-defined]
+        elif self.episode_length is not None and self.episode_length > max_episode_steps:
+            raise ValueError(
+                f"episode_length={self.episode_length} is longer than the TimeLimit around the env "
+                f"(max_episode_steps={max_episode_steps}): its last step, which carries the paper's last-step reward and "
+                "paper_performance, would never come. Pass only max_episode_steps, or equal values"
+            )
+
     def close(self) -> None:
         self.env.close()
 
@@ -112,3 +130,20 @@ class PaperEnv(gym.Env):
 def as_action_vector(action: Any, action_space: gym.spaces.Box) -> np.ndarray:
     """Flatten an action to a float64 vector clipped to the Box bounds."""
     return np.clip(np.asarray(action, dtype=np.float64).reshape(action_space.shape), action_space.low, action_space.high)
+
+
+class EpisodeLengthFromTimeLimit(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Pass-through wrapper that ``gym.make`` adds outside the ``TimeLimit`` of the paper's ids (their registered
+    ``additional_wrappers``): it gives the :class:`PaperEnv` inside the ``TimeLimit``'s length, so
+    ``gym.make(id, max_episode_steps=N)`` alone gives N-step episodes with the paper's last-step reward."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+        limits, node = [], env
+        while isinstance(node, gym.Wrapper):
+            if isinstance(node, gym.wrappers.TimeLimit):
+                limits.append(node._max_episode_steps)
+            node = node.env
+        if limits and isinstance(node, PaperEnv):
+            node.set_time_limit(min(limits))

@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.envs.mujoco.half_cheetah_v5 import HalfCheetahEnv
 
-from sb3_denfac.envs.common import EpisodeRewardWrapper, PaperEnv, as_action_vector
+from sb3_denfac.envs.common import DEFAULT_EPISODE_LENGTH, EpisodeRewardWrapper, PaperEnv, as_action_vector
 
 PENALISED_GEOMS = ("head", "fthigh", "bthigh")
 
@@ -144,7 +144,8 @@ class HalfCheetahPaperEnv(PaperEnv):
     :param head_contact_reward: See :class:`HalfCheetahPaperReward` (default -1000).
     :param ctrl_cost_weight: See :class:`HalfCheetahPaperReward` (default 0.05).
     :param contact_cost: See :class:`HalfCheetahPaperReward` (default 1).
-    :param episode_length: Episode length (default 500), see :class:`~sb3_denfac.envs.common.PaperEnv`.
+    :param episode_length: Episode length (default: the TimeLimit of ``gym.make``, else 500), see
+        :class:`~sb3_denfac.envs.common.PaperEnv`.
     :param kwargs: Passed to :class:`HalfCheetahContactEnv` (HalfCheetah-v5 arguments, ``render_mode``...).
     """
 
@@ -156,11 +157,12 @@ class HalfCheetahPaperEnv(PaperEnv):
         head_contact_reward: float = -1000.0,
         ctrl_cost_weight: float = 0.05,
         contact_cost: float = 1.0,
-        episode_length: int = 500,
+        episode_length: int | None = None,
         **kwargs: Any,
     ) -> None:
         base = HalfCheetahContactEnv(**kwargs)
+        length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
         wrapped = HalfCheetahPaperReward(
-            base, ctrl_cost_weight, contact_cost, terminate_on_head_contact, head_contact_reward, episode_length
+            base, ctrl_cost_weight, contact_cost, terminate_on_head_contact, head_contact_reward, length
         )
-        super().__init__(wrapped)
+        super().__init__(wrapped, episode_length_given=episode_length is not None)

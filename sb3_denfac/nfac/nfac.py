@@ -10,11 +10,11 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from torch.nn import functional as F
 
+from sb3_denfac.common.budget import budget_reached
 from sb3_denfac.common.checks import check_positive
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
-    refresh_bn_statistics,
     td_targets,
 )
 from sb3_denfac.nfac.policies import MlpPolicy, NFACPolicy
@@ -47,11 +47,13 @@ class NFAC(DeterministicOnPolicyAlgorithm):
     carry over to eval mode: on a 10-step task the learned actions were several times worse.)
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
-    :param env: environment or its registered id; a single environment (episode-wise updates).
+    :param env: environment or its registered id, one or several: a rollout ends when ``n_episodes`` episodes have
+        ended in all, and the episodes still running in the other environments enter the update as they are (their
+        last transition bootstraps) and go on in the next rollout.
     :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
-    :param n_episodes: episodes collected per update (authors: 1).
+    :param n_episodes: episodes finished per update, over all environments (authors: 1).
     :param n_fitted_iterations: K, fitted rounds of the critic per update (authors' ``number_fitted_iteration``).
     :param critic_steps: full-batch Adam steps per fitted round (authors' ``stoch_iter``).
     :param actor_steps: full-batch Adam steps of the actor per update (authors' ``stoch_iter``).
@@ -111,7 +113,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             learning_rate=learning_rate,
             actor_learning_rate=actor_learning_rate,
             critic_learning_rate=critic_learning_rate,
-            n_steps=1,  # unused: rollouts are whole episodes
+            n_steps=1,  # unused: rollouts end with episodes
             gamma=gamma,
             sigma=sigma,
             max_grad_norm=max_grad_norm,
@@ -123,8 +125,6 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             device=device,
             _init_setup_model=False,
         )
-        if self.env is not None:
-            self._check_n_envs(self.n_envs)
         self.n_episodes = n_episodes
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
@@ -135,13 +135,8 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         if _init_setup_model:
             self._setup_model()
 
-    @staticmethod
-    def _check_n_envs(n_envs: int) -> None:
-        if n_envs != 1:
-            raise ValueError(f"NFAC learns from whole episodes and needs a single environment, got n_envs={n_envs}")
-
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
-        return n_episodes >= self.n_episodes
+        return n_episodes >= self.n_episodes or budget_reached(self)  # an unfinished episode is used as it is
 
     @th.no_grad()
     def _td_targets(self, data: Transitions) -> th.Tensor:
@@ -155,10 +150,10 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             targets = self._td_targets(data)  # computed before the optional reset, as the authors
             if self.reset_critic:
                 self.policy.reset_critic()  # new weights, BN statistics and Adam state; same learning rate
-                refresh_bn_statistics([self.policy.critic], self.policy.features(data.observations), exact_when_fresh=True)
+                self.policy.refresh_bn_statistics(data.observations, exact_when_fresh=True, critic_only=True)
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
-                self._gradient_step(loss, self.policy.critic, self.policy.critic_optimizer)
+                self._gradient_step(loss, self.policy.critic_optimizer)
         return loss.item()
 
     def actor_targets(self, data: Transitions) -> tuple[th.Tensor, th.Tensor, float]:
@@ -184,7 +179,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             observations = data.observations[mask]
             for _ in range(self.actor_steps):
                 actor_loss = F.mse_loss(self.policy.actor_mean(observations), targets)
-                self._gradient_step(actor_loss, self.policy.actor, self.policy.actor_optimizer)
+                self._gradient_step(actor_loss, self.policy.actor_optimizer)
             loss = actor_loss.item()
         return loss, positive_fraction
 
@@ -194,8 +189,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         self._update_learning_rates()
         data = self.rollout_buffer.get(self.device)
         self.policy.set_training_mode(False)  # gradient steps with BN in eval mode, see the class docstring
-        features = self.policy.features(data.observations)
-        refresh_bn_statistics([self.policy.actor, self.policy.critic], features, exact_when_fresh=True)
+        self.policy.refresh_bn_statistics(data.observations, exact_when_fresh=True)
         if self.update_critic_first:
             critic_loss = self.fit_critic(data)
             actor_loss, positive_fraction = self.update_actor(data)
@@ -220,7 +214,9 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfNFAC:
-        """Train for at least ``total_timesteps`` steps (whole episodes); ``log_interval`` counts updates."""
+        """Train for ``total_timesteps`` steps; ``log_interval`` counts updates. An episode still running at
+        ``total_timesteps`` ends the rollout there: the update uses it as it is (its last transition bootstraps), and the
+        next ``learn(reset_num_timesteps=False)`` continues it."""
         return super().learn(
             total_timesteps=total_timesteps,
             callback=callback,
