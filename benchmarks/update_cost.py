@@ -292,6 +292,14 @@ def main() -> None:
         runs=[],
         training_runs=[],
     )
+    output = Path(args.output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+
+    def save() -> None:  # after every run: an interrupted benchmark keeps what it measured
+        results["meta"]["load_average_end"] = os.getloadavg()
+        output.with_suffix(".json").write_text(json.dumps(results, indent=1))
+        output.with_suffix(".md").write_text(write_markdown(results))
+
     with tempfile.TemporaryDirectory() as tmp:
         buffers = {name: make_buffers(name, Path(tmp), TRAINED_EPISODES[name]) for name in args.envs}
         for threads in args.threads:
@@ -301,16 +309,12 @@ def main() -> None:
                     run = dict(env=name, buffer=tag, **time_buffer(path, ENVS[name], args.repeats))
                     results["runs"].append(run)
                     print(json.dumps({k: v for k, v in run.items() if k != "times_s"}), flush=True)
+                    save()
             if args.training_run:
                 results["training_runs"].append(training_run())
                 print(json.dumps({k: v for k, v in results["training_runs"][-1].items() if k != "update_s"}), flush=True)
-    results["meta"]["load_average_end"] = os.getloadavg()
-    output = Path(args.output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.with_suffix(".json").write_text(json.dumps(results, indent=1))
-    markdown = write_markdown(results)
-    output.with_suffix(".md").write_text(markdown)
-    print(markdown)
+                save()
+    print(output.with_suffix(".md").read_text())
 
 
 if __name__ == "__main__":
