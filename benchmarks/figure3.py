@@ -142,10 +142,9 @@ def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dic
             "--ray-address needs Ray, which is not installed: pip install 'sb3-denfac[distributed]' (or pip install ray). "
             "Every node of the cluster also needs sb3-denfac installed."
         ) from e
-    # Ship this module's code by value so cluster nodes need only the installed package, not this checkout.
+    # Ship the run's code by value so cluster nodes need only the installed package, not this checkout.
     with contextlib.suppress(Exception):
-        for module in (figure3_run, suites):
-            ray.cloudpickle.register_pickle_by_value(module)
+        ray.cloudpickle.register_pickle_by_value(figure3_run)
     ray.init(address=None if address == "local" else address, ignore_reinit_error=True)
     try:
         remote = ray.remote(num_cpus=1)(figure3_run.run_one)
@@ -212,18 +211,22 @@ def sweep(
         budget = suites.budget(env, (episodes or {}).get(env))
         if budget.episodes < 1:
             raise ValueError(f"--episodes for {env} must be >= 1, got {budget.episodes}")
+        hyperparams, source = suites.load_hyperparams(algo, env, hyperparams_dirs)
         task = {
             "algo": algo,
+            "zoo_algo": suites.ALGOS[algo].zoo_algo,
+            "hyperparams": hyperparams,
+            "hyperparams_source": source,
             "env": env,
             "seed": int(seed),
             "episodes": budget.episodes,
             "eval_every": budget.eval_every,
             "eval_episodes": budget.eval_episodes,
             "eval_kwargs": dict(budget.eval_kwargs),
-            "hyperparams_dirs": [str(Path(d).resolve()) for d in hyperparams_dirs],
         }
         done_path = run_paths(results_dir, algo, env, seed)[1]
         (status["skipped"] if done_path.exists() else tasks).append(task)
+    tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
     if verbose:
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
     sweep_info = {

@@ -22,7 +22,7 @@ import figure3_stats as st
 import figure3_verdicts as verdicts
 import numpy as np
 import pandas as pd
-from figure3_suites import ALGOS, SUITES, Suite
+from figure3_suites import ALGOS, SUITES, Suite, estimated_cost
 
 from sb3_denfac.envs.facts import env_facts
 
@@ -133,35 +133,45 @@ def _md(df: pd.DataFrame) -> str:
 
 
 def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
-    """Finished / wanted seeds per (algo, env) of the suite, for the cells that are not complete."""
+    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the estimated CPU hours still needed
+    (``figure3_cost.py``'s plan)."""
     done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
     rows = {}
     for algo in suite.algos:
         want = suite.seeds(algo)
-        counts = {env: sum((algo, env, s) in done for s in want) for env in suite.envs}
-        if any(n < len(want) for n in counts.values()):
-            rows[ALGOS[algo].label] = {env: f"{n}/{len(want)}" for env, n in counts.items()}
+        row, hours = {}, 0.0
+        for env in suite.envs:
+            left = sum((algo, env, s) not in done for s in want)
+            cost = left * estimated_cost(algo, env) / 3600
+            hours += cost
+            row[env] = f"{len(want) - left}/{len(want)}" + (f", {cost:.2f} h" if left and np.isfinite(cost) else "")
+        if hours != 0.0:
+            rows[ALGOS[algo].label] = {**row, "CPU hours left": f"{hours:.2f}"}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
 
 
 def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, stem: str, suite: Suite | None = None) -> str:
     """The markdown of one report; writes its three plots ``<stem>.png``, ``<stem>_compute.png``, ``<stem>_profile.png``."""
-    excluded = runs[~runs["trained"]]
-    runs = runs[runs["trained"]]
-    episodes = episodes.merge(runs[["algo", "env", "seed"]], on=["algo", "env", "seed"])
-    envs, algos = _env_order(runs["env"]), _order(runs["algo"])
     lines = [f"# {title}", ""]
     if suite is not None:
         missing = missing_cells(suite, runs)
         lines += [f"Suite `{suite.name}`: {suite.description}.", ""]
         lines += (
-            ["Missing cells (not yet run):", "", _md(missing), ""] if not missing.empty else ["Every cell is complete.", ""]
+            ["Cells not complete (finished/wanted seeds, estimated CPU hours to finish):", "", _md(missing), ""]
+            if not missing.empty
+            else ["Every cell is complete.", ""]
         )
-    commits = sorted(set(runs["commit"]))
-    lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
+    excluded = runs[~runs["trained"]]
     if not excluded.empty:
         lines += ["Runs left out because their model never trained (budget within the warm-up):", "",
                   _md(excluded[["algo", "env", "seed", "timesteps", "hyperparams_source"]]), ""]  # fmt: skip
+    runs = runs[runs["trained"]]
+    if runs.empty:
+        return "\n".join([*lines, "No finished run has trained yet.", ""])
+    episodes = episodes.merge(runs[["algo", "env", "seed"]], on=["algo", "env", "seed"])
+    envs, algos = _env_order(runs["env"]), _order(runs["algo"])
+    commits = sorted(set(runs["commit"]))
+    lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
     plots.curves(episodes, envs, algos, out / f"{stem}.png")
     plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")
     lines += [f"![curves]({stem}.png)", "", f"![compute]({stem}_compute.png)", ""]

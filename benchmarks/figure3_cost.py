@@ -3,11 +3,14 @@
 Runs every algorithm on every env for a few episodes with the sweep's own runner (``figure3_run.run_one``, one torch
 thread, results under ``benchmarks/results/cost/``, resumable), then extrapolates each run to its full budget:
 
-- ``step`` model (TD3, SAC, CrossQ, DDPG, CACLA+, NFAC+, CMA-ES): a constant cost per environment step once learning
-  has started (NFAC+ refits on the last episode only, CMA-ES only acts), fitted on the episodes after the warm-up;
-- ``replay`` model (DENFAC): the episode's cost is ``a * steps + b * |D|``, with ``|D| = min(buffer_size, steps so
-  far)``: its end-of-episode update sweeps the whole replay memory, so it grows until D is full. ``a, b`` are fitted
-  by non-negative least squares on the measured episodes.
+- ``step`` model (TD3, SAC, CrossQ, DDPG, CACLA+: online updates): a constant cost per environment step once
+  learning has started, measured on the episodes after the warm-up;
+- ``episode`` model (NFAC+ refits on the last episode, CMA-ES only acts and updates per generation): an episode costs
+  ``a * steps + c``;
+- ``replay`` model (DENFAC): an episode costs ``a * steps + b * |D| + c``, with ``|D| = min(buffer_size, steps so
+  far)``: its end-of-episode update sweeps the whole replay memory, so it grows until D is full. Where the short run
+  never half-filled D, ``b`` is taken from the same row's largest measured value on another env.
+  ``a, b, c`` are fitted by non-negative least squares on the measured episodes.
 
 Both extrapolations assume full-length episodes (an upper bound where episodes end early: CartPole and
 InvertedPendulum falls, the Acrobot goal). Writes ``benchmarks/results/sweep_plan.md`` and ``sweep_plan.csv``.
@@ -32,8 +35,9 @@ from sb3_denfac.envs.facts import env_facts
 RESULTS = Path(__file__).resolve().parent / "results"
 COST_DIR = RESULTS / "cost"
 REPLAY_ALGOS = {"denfac", "denfac_default"}
+EPISODE_ALGOS = {"nfac", "cmaes"}
 # Episodes measured per env: enough steps past the step algorithms' warm-up, and (DENFAC) past a full D where cheap.
-MEASURE_EPISODES = {"acrobot": 3, "cartpole": 10, "halfcheetah": 2, "pendulum": 3, "invertedpendulum": 20, "acrobot75": 10}
+MEASURE_EPISODES = {"acrobot": 3, "cartpole": 10, "halfcheetah": 2, "pendulum": 3, "invertedpendulum": 60, "acrobot75": 10}
 REPLAY_EPISODES = {"acrobot": 14, "cartpole": 20, "halfcheetah": 8, "pendulum": 18, "invertedpendulum": 20, "acrobot75": 20}
 SESSION_CORE_HOURS = 2.5  # one core of one working session, after setup
 
@@ -64,26 +68,35 @@ def extrapolate(episodes: pd.DataFrame, algo: str, env: str, budget: int, hyperp
     delta = np.diff(np.concatenate([[0.0], cpu]))
     row = {"algo": algo, "env": env, "budget": budget, "measured_episodes": len(e), "measured_steps": int(steps[-1]),
            "measured_cpu": float(cpu[-1]), "mean_length": float(lengths.mean())}  # fmt: skip
-    if algo in REPLAY_ALGOS:
+    if algo in REPLAY_ALGOS or algo in EPISODE_ALGOS:
         from scipy.optimize import nnls
 
-        d = _buffer_size(algo, {k: ast.literal_eval(v) for k, v in hyperparams.items()})
+        d = _buffer_size(algo, {k: ast.literal_eval(v) for k, v in hyperparams.items()}) if algo in REPLAY_ALGOS else 0
         memory = np.minimum(d, np.concatenate([[0], steps[:-1]]))  # |D| at the update before each episode's end
-        coef, _ = nnls(np.column_stack([lengths, memory]), delta)
-        k = np.arange(1, budget + 1)
-        full_memory = np.minimum(d, (k - 1) * max_steps)
+        coef, _ = nnls(np.column_stack([lengths, memory, np.ones_like(lengths)]), delta)
+        full_memory = np.minimum(d, np.arange(budget) * max_steps).sum()
         row.update(
-            model=f"replay (D = {d})",
+            model=f"replay (D = {d})" if d else "episode",
             per_step=coef[0],
             per_d=coef[1],
-            estimate=float(coef @ [budget * max_steps, full_memory.sum()]),
+            per_episode=coef[2],
+            d_fill=float(memory.max() / d) if d else np.nan,
+            memory_sum=float(full_memory),
+            estimate=float(coef @ [budget * max_steps, full_memory, budget]),
         )
     else:
         starts = int(ast.literal_eval(hyperparams.get("learning_starts", "0")))
         first = int(np.searchsorted(steps, starts, side="right"))  # first episode ending after the warm-up
         first = min(first, len(e) - 2)
         per_step = (cpu[-1] - cpu[first]) / max(steps[-1] - steps[first], 1)
-        row.update(model="step", per_step=per_step, per_d=0.0, estimate=float(per_step * budget * max_steps))
+        row.update(
+            model="step",
+            per_step=per_step,
+            per_d=0.0,
+            per_episode=0.0,
+            d_fill=np.nan,
+            estimate=float(per_step * budget * max_steps),
+        )
     return row
 
 
@@ -104,6 +117,18 @@ def plan() -> pd.DataFrame:
         meta = json.loads((COST_DIR / "runs" / algo / env / "seed_0.json").read_text())
         rows.append(extrapolate(group, algo, env, suites.budget(env).episodes, meta["hyperparams"]))
     costs = pd.DataFrame(rows)
+    # Where the short run never half-filled D, its cost per |D| is not measured: take the largest one of the same row
+    # measured with D at least half full (conservative).
+    for i, r in costs.iterrows():
+        if r["algo"] in REPLAY_ALGOS and r["d_fill"] < 0.5:
+            ref = costs[(costs["algo"] == r["algo"]) & (costs["d_fill"] >= 0.5)]
+            if not ref.empty:
+                j = ref["per_d"].idxmax()
+                costs.loc[i, "per_d"] = ref.loc[j, "per_d"]
+                costs.loc[i, "model"] = f"{r['model']}, cost per |D| from {ref.loc[j, 'env']}"
+                costs.loc[i, "estimate"] = (
+                    r["per_step"] * r["budget"] * _max_steps(r["env"]) + ref.loc[j, "per_d"] * r["memory_sum"]
+                )
     costs.to_csv(RESULTS / "sweep_plan.csv", index=False)
     lines = [
         "# Sweep plan: measured CPU cost per run and the whole sweep",

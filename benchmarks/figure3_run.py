@@ -107,7 +107,9 @@ def machine_info() -> dict[str, Any]:
 
 
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
-    """One (algo, env, seed) run. Returns ``{"task", "meta", "episodes", "log"}`` or ``{"task", "error", "log"}``."""
+    """One (algo, env, seed) run of ``task["zoo_algo"]`` with ``task["hyperparams"]`` (needs only the installed package).
+
+    Returns ``{"task", "meta", "episodes", "log"}`` or ``{"task", "error", "log"}``."""
     import torch
 
     torch.set_num_threads(1)
@@ -115,7 +117,6 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
     load_start = os.getloadavg()
     try:
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-            import figure3_suites as suites
             import gymnasium as gym
             from stable_baselines3.common.callbacks import CallbackList
 
@@ -125,10 +126,9 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             from sb3_denfac.zoo import make_model
 
             facts = env_facts(task["env"])
-            algo = suites.ALGOS[task["algo"]]
-            hyperparams, source = suites.load_hyperparams(task["algo"], task["env"], task.get("hyperparams_dirs", ()))
+            hyperparams, source = task["hyperparams"], task["hyperparams_source"]
             start, cpu_start = time.perf_counter(), time.process_time()
-            model = make_model(algo.zoo_algo, facts.gym_id, hyperparams, seed=task["seed"], device="cpu")
+            model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device="cpu")
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
@@ -149,7 +149,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
     meta = {
         **{k: task[k] for k in ("algo", "env", "seed", "eval_every", "eval_episodes")},
         "eval_kwargs": task.get("eval_kwargs", {}),
-        "zoo_algo": algo.zoo_algo,
+        "zoo_algo": task["zoo_algo"],
         "gym_id": facts.gym_id,
         "episodes_requested": task["episodes"],
         "episodes": len(episodes),

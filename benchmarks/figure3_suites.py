@@ -7,6 +7,7 @@ cell that two suites contain is trained once.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,7 @@ from sb3_denfac.envs.facts import env_facts
 _HERE = Path(__file__).resolve().parent
 PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
 BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
+SWEEP_PLAN = _HERE / "results" / "sweep_plan.csv"  # estimated CPU seconds per run, written by figure3_cost.py
 
 
 @dataclass(frozen=True)
@@ -163,3 +165,18 @@ def load_hyperparams(algo: str, env: str, dirs: Iterable[str | Path] = ()) -> tu
         hyperparams["gamma"] = env_fact.gamma
         source += f" + the env's gamma {env_fact.gamma}"
     return hyperparams, source
+
+
+@functools.cache
+def _cost_table() -> dict[tuple[str, str], float]:
+    import csv
+
+    if not SWEEP_PLAN.exists():
+        return {}
+    with SWEEP_PLAN.open(newline="") as f:
+        return {(r["algo"], r["env"]): float(r["estimate"]) for r in csv.DictReader(f)}
+
+
+def estimated_cost(algo: str, env: str) -> float:
+    """Estimated CPU seconds of one full run (``results/sweep_plan.csv``); NaN if not measured."""
+    return _cost_table().get((algo, env), float("nan"))

@@ -185,7 +185,9 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     meta = json.loads((out / "runs" / "td3" / "cartpole" / "seed_1.json").read_text())
     assert meta["episodes"] == 3 and meta["cpu_time"] > 0 and meta["hyperparams_source"].startswith("td3.yml[default]")
     assert meta["git"]["commit"] and meta["machine"]["torch_threads"] == 1 and len(meta["load_average"]["start"]) == 3
-    assert [e["episode"] for e in meta["evaluations"]] == [3] and len(meta["evaluations"][0]["scores"]) == 1
+    # evaluated at the last episode (before the 10th), from CartPole's random start: a zero action cannot score 0 there
+    assert [e["episode"] for e in meta["evaluations"]] == [3] and meta["eval_kwargs"] == {"random_start": True}
+    assert len(meta["evaluations"][0]["scores"]) == suites.BUDGETS["cartpole"].eval_episodes == 5
     runs = {(r["algo"], r["seed"]): r for r in _rows(out / "runs.csv")}
     assert runs[("sac", "0")]["trained"] == "False" and runs[("td3", "0")]["trained"] == "True"
 
