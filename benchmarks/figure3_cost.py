@@ -149,6 +149,13 @@ def plan() -> pd.DataFrame:
     ]
     lines += ["Measurements (one seed):", "", show.to_markdown(index=False, floatfmt=".4g"), ""]
     lookup = {(r.algo, r.env): r.estimate for r in costs.itertuples()}
+    if (RESULTS / "sweep" / "runs").exists():
+        _, finished = fa.load(RESULTS / "sweep")
+        finished["estimate"] = [lookup.get((a, e), np.nan) for a, e in zip(finished["algo"], finished["env"], strict=True)]
+        ratio = finished["cpu_time"] / finished["estimate"]
+        lines += [f"Check against the {len(finished)} sweep runs finished so far: measured / estimated CPU seconds, median "
+                  f"{ratio.median():.2f} (range {ratio.min():.2f}-{ratio.max():.2f}). The machine was shared (load average "
+                  "5-8 on 2 cores), which slows a process's CPU seconds too.", ""]  # fmt: skip
     for suite in suites.SUITES.values():
         done = set()
         if (RESULTS / "sweep" / "runs").exists():
