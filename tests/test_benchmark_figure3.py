@@ -220,3 +220,25 @@ def test_ray_sweep(tmp_path):
     pytest.importorskip("ray")
     status = figure3.sweep(["td3"], ["cartpole"], [0], 2, results_dir=tmp_path, ray_address="local", verbose=0)
     assert len(status["done"]) == 1 and (tmp_path / "runs" / "td3" / "cartpole" / "seed_0.json").exists()
+
+
+def test_cost_extrapolation_recovers_the_cost_models():
+    """Synthetic per-episode CPU times: the step model and the replay model (cost growing with |D|) are recovered."""
+    import figure3_cost as cost
+    import pandas as pd
+
+    lengths = np.array([500, 120, 300, 500, 40, 500, 250, 500, 500, 80, 500, 500, 360, 500])
+    steps = np.cumsum(lengths)
+    memory = np.minimum(6000, np.concatenate([[0], steps[:-1]]))
+    per_episode_cpu = 1e-3 * lengths + 2e-5 * memory + 0.05  # a * steps + b * |D| + c
+    episodes = pd.DataFrame(
+        {"episode": np.arange(1, 15), "cpu_time": np.cumsum(per_episode_cpu), "timesteps": steps, "length": lengths}
+    )
+    row = cost.extrapolate(episodes, "denfac", "acrobot", 100, {"buffer_size": "6000"})
+    assert (row["per_step"], row["per_d"], row["per_episode"]) == pytest.approx((1e-3, 2e-5, 0.05), rel=1e-6)
+    full = np.minimum(6000, np.arange(100) * 500).sum()
+    assert row["estimate"] == pytest.approx(1e-3 * 100 * 500 + 2e-5 * full + 0.05 * 100, rel=1e-6)
+
+    online = episodes.assign(cpu_time=np.maximum(0, steps - 100) * 0.01)  # 10 ms per step after a 100-step warm-up
+    row = cost.extrapolate(online, "sac", "acrobot", 100, {"learning_starts": "100"})
+    assert row["model"] == "step" and row["estimate"] == pytest.approx(0.01 * 100 * 500, rel=1e-6)
