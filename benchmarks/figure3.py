@@ -1,34 +1,31 @@
-"""Figure 3 data-efficiency benchmark: algorithms x envs x seeds, each for a budget of EPISODES.
+"""Figure 3 data-efficiency benchmark: algorithms x envs x seeds, each for a budget of episodes; one runner, resumable.
 
-Every run trains ``ALGO("MlpPolicy", env, **hyperparams)`` with the hyperparameters of ``sb3_denfac/hyperparams/<algo>.yml``
-(RL Zoo conventions, keyed by env id, ``default:`` fallback; algorithm defaults when missing, recorded in the results)
-and stops after ``--episodes`` episodes. Each finished episode's ``info["paper_performance"]`` is recorded by
-``sb3_denfac.common.callbacks.EpisodePerformanceCallback``. One run writes, at its end and atomically,
-``runs/<algo>/<env>/seed_<k>.csv`` (one line per episode) then ``seed_<k>.json`` (run metadata, wall time);
-a rerun skips runs whose ``.json`` exists, so an interrupted sweep resumes. The zoo's ``evaluations.npz`` is written
-under ``zoo/<algo>/<env-id>_<seed>/`` (training episodes, not separate evaluations; extra key ``best_so_far``).
-At the end, ``figure3_analysis.py`` writes the plot and the tables.
+Runs are chosen by a suite (``--suite figure3``, ``--suite generalisation``: see ``figure3_suites.py``) and/or by
+``--algos/--envs/--seeds``; each run (``figure3_run.run_one``) trains ``ALGO("MlpPolicy", env, **hyperparams)`` with the
+YAML entry of its row for ``--episodes`` episodes (the env's budget by default) and writes, at its end and atomically,
+``runs/<algo>/<env>/seed_<k>.csv`` (one line per episode) then ``seed_<k>.json`` (metadata: hyperparameters and their
+source, commit, machine, load, CPU and wall seconds, the deterministic evaluations). A rerun skips runs whose ``.json``
+exists, so an interrupted sweep resumes. The zoo's ``evaluations.npz`` is written under ``zoo/<algo>/<env-id>_<seed>/``.
+At the end, ``figure3_analysis.py`` writes the tables, the verdicts and the plots of every suite.
 
 Examples::
 
-    python benchmarks/figure3.py --algos td3 sac --envs cartpole --seeds 0 1 2 --episodes 50 --workers 2
-    python benchmarks/figure3.py --ray-address auto          # same sweep on a Ray cluster (pip install ray)
+    python benchmarks/figure3.py --suite figure3 --workers 0                 # the whole sweep, in this process
+    python benchmarks/figure3.py --suite generalisation --envs pendulum      # one env of a suite
+    python benchmarks/figure3.py --algos td3 sac --envs cartpole --seeds 0 1 --episodes 50 --workers 2
+    python benchmarks/figure3.py --suite figure3 --ray-address auto          # on a Ray cluster (pip install ray)
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import functools
 import io
 import json
 import os
-import platform
 import signal
-import subprocess
 import sys
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -40,87 +37,11 @@ for _p in (str(_HERE), str(_REPO)):  # run from a checkout without installing th
         sys.path.insert(0, _p)
 
 import figure3_analysis as fa  # noqa: E402
+import figure3_run  # noqa: E402
+import figure3_suites as suites  # noqa: E402
 
-# Zoo names of the compared algorithms; models are built by sb3_denfac.zoo.make_model (the RL Zoo's preprocessing).
-ALGOS: list[str] = ["denfac", "ddpg", "nfac", "cacla", "cmaes", "td3", "sac", "crossq"]
-DEFAULT_ENVS = ["acrobot", "cartpole", "halfcheetah"]
-# Used only when hyperparams/<algo>.yml has no entry for the env (recorded as "benchmark fallback" in the results):
-# the env's paper gamma, plus exploration noise for TD3, whose SB3 default explores with no noise at all.
-FALLBACK_HYPERPARAMS: dict[str, dict[str, Any]] = {"td3": {"noise_type": "normal", "noise_std": 0.1}}
-DEFAULT_HYPERPARAMS_DIR = _REPO / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
-DEFAULT_RESULTS_DIR = _HERE / "results" / "figure3"
-
-
-def load_hyperparams(algo: str, env: str, hyperparams_dir: str | Path) -> tuple[dict[str, Any], str]:
-    """Zoo-style lookup: ``<dir>/<algo>.yml``, entry for the env id, else ``default``, else the benchmark fallback
-    (algorithm defaults + the env's paper gamma + ``FALLBACK_HYPERPARAMS[algo]``). Returns (hyperparams, source)."""
-    import yaml
-
-    spec = fa.env_spec(env)
-    path = Path(hyperparams_dir) / f"{algo}.yml"
-    data: dict[str, Any] = {}
-    if path.exists():
-        with path.open() as f:
-            data = yaml.safe_load(f) or {}
-    if spec.gym_id in data:
-        return dict(data[spec.gym_id]), f"{path.name}[{spec.gym_id}]"
-    if "default" in data:
-        return dict(data["default"]), f"{path.name}[default]"
-    fallback = dict(FALLBACK_HYPERPARAMS.get(algo, {}))
-    if spec.gamma is not None:
-        fallback["gamma"] = spec.gamma
-    missing = f"no {spec.gym_id} entry in {path.name}" if path.exists() else f"no {path.name}"
-    return fallback, f"benchmark fallback ({missing}): algorithm defaults + {fallback}"
-
-
-def make_model(algo: str, gym_id: str, hyperparams: dict[str, Any], seed: int, device: str = "cpu") -> Any:
-    """Build the env and the model exactly as the RL Zoo would from these hyperparameters (no monitor file)."""
-    from sb3_denfac.zoo import make_model as zoo_make_model
-
-    return zoo_make_model(algo, gym_id, hyperparams, seed=seed, device=device)
-
-
-def run_one(task: dict[str, Any]) -> dict[str, Any]:
-    """One (algo, env, seed) run. Returns ``{"task", "meta", "episodes", "log"}`` or ``{"task", "error", "log"}``."""
-    import torch
-
-    torch.set_num_threads(1)
-    log = io.StringIO()
-    try:
-        with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-            import gymnasium as gym
-
-            import sb3_denfac  # noqa: F401  (registers the paper's envs)
-            from sb3_denfac.common.callbacks import EpisodePerformanceCallback
-
-            spec = fa.env_spec(task["env"])
-            hyperparams, source = load_hyperparams(task["algo"], task["env"], task["hyperparams_dir"])
-            start, cpu_start = time.perf_counter(), time.process_time()
-            model = make_model(task["algo"], spec.gym_id, hyperparams, task["seed"])
-            callback = EpisodePerformanceCallback(max_episodes=task["episodes"], lower_is_better=spec.lower_is_better)
-            max_steps = gym.spec(spec.gym_id).max_episode_steps or 10_000
-            # The step budget only guards against a run that never ends an episode; the episode budget stops training.
-            model.learn(total_timesteps=task["episodes"] * max_steps + 1, callback=callback)
-            wall_time, cpu_time = time.perf_counter() - start, time.process_time() - cpu_start
-            model.get_env().close()
-    except Exception:
-        return {"task": task, "error": traceback.format_exc(), "log": log.getvalue()}
-    episodes = callback.records[: task["episodes"]]
-    meta = {
-        **{k: task[k] for k in ("algo", "env", "seed")},
-        "gym_id": spec.gym_id,
-        "episodes_requested": task["episodes"],
-        "episodes": len(episodes),
-        "timesteps": int(model.num_timesteps),
-        "wall_time": wall_time,
-        "cpu_time": cpu_time,
-        "hyperparams_source": source,
-        "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
-        "lower_is_better": spec.lower_is_better,
-        "host": platform.node(),
-        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    return {"task": task, "meta": meta, "episodes": episodes, "log": log.getvalue()}
+DEFAULT_RESULTS_DIR = _HERE / "results" / "sweep"
+EPISODE_FIELDS = ("episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time", "cpu_time")
 
 
 # ---------------------------------------------------------------------------------------------------------------- files
@@ -152,8 +73,7 @@ def save_result(result: dict[str, Any], results_dir: Path, zoo_logs: bool = True
         return
 
     def write_csv(f: io.TextIOBase) -> None:
-        fields = [k for k in fa.EPISODE_FIELDS if k not in ("algo", "env", "seed")]
-        writer = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        writer = csv.DictWriter(f, fieldnames=EPISODE_FIELDS, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(result["episodes"])
 
@@ -183,31 +103,6 @@ def write_zoo_evaluations(result: dict[str, Any], zoo_dir: Path) -> None:
     )
 
 
-def machine_info() -> dict[str, Any]:
-    import torch
-
-    cpu = ""
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    git: dict[str, Any] = {}
-    with contextlib.suppress(OSError, subprocess.SubprocessError):
-        run = functools.partial(subprocess.run, cwd=_REPO, capture_output=True, text=True, timeout=10, check=True)
-        git["commit"] = run(["git", "rev-parse", "HEAD"]).stdout.strip()
-        # the code actually run: uncommitted changes to the package are listed
-        git["modified"] = run(["git", "status", "--porcelain", "--", "sb3_denfac"]).stdout.splitlines()
-    return {
-        "git": git,
-        "nproc": os.cpu_count(),
-        "cpu_model": cpu or platform.processor(),
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "platform": platform.platform(),
-    }
-
-
 # ---------------------------------------------------------------------------------------------------------------- sweep
 
 
@@ -221,7 +116,7 @@ def _init_worker() -> None:
 def _run_local(tasks: list[dict[str, Any]], workers: int, on_result: Callable[[dict[str, Any]], None]) -> None:
     if workers <= 0:
         for task in tasks:
-            on_result(run_one(task))
+            on_result(figure3_run.run_one(task))
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -229,7 +124,7 @@ def _run_local(tasks: list[dict[str, Any]], workers: int, on_result: Callable[[d
     # spawn: fresh interpreters (no inherited torch thread pools), same behaviour on Linux and macOS
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker) as pool:
         try:
-            futures = [pool.submit(run_one, task) for task in tasks]
+            futures = [pool.submit(figure3_run.run_one, task) for task in tasks]
             for future in as_completed(futures):
                 on_result(future.result())
         except BaseException:  # interrupted (Ctrl-C, SIGTERM): do not leave workers training in the background
@@ -247,13 +142,12 @@ def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dic
             "--ray-address needs Ray, which is not installed: pip install 'sb3-denfac[distributed]' (or pip install ray). "
             "Every node of the cluster also needs sb3-denfac installed."
         ) from e
-    # Ship this module's code by value so cluster nodes need only the installed package, not this checkout.
+    # Ship the run's code by value so cluster nodes need only the installed package, not this checkout.
     with contextlib.suppress(Exception):
-        ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
-        ray.cloudpickle.register_pickle_by_value(fa)
+        ray.cloudpickle.register_pickle_by_value(figure3_run)
     ray.init(address=None if address == "local" else address, ignore_reinit_error=True)
     try:
-        remote = ray.remote(num_cpus=1)(run_one)
+        remote = ray.remote(num_cpus=1)(figure3_run.run_one)
         pending = [remote.remote(task) for task in tasks]
         while pending:  # results come back to this driver, which alone writes the files
             done, pending = ray.wait(pending, num_returns=1)
@@ -262,57 +156,86 @@ def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dic
         ray.shutdown()  # disconnects from a cluster; stops a "local" one
 
 
+def select_cells(
+    suite: str | None = None,
+    algos: Sequence[str] | None = None,
+    envs: Sequence[str] | None = None,
+    seeds: Sequence[int] | None = None,
+) -> list[tuple[str, str, int]]:
+    """The (algo, env, seed) cells of ``suite`` restricted to ``algos/envs/seeds``, or (no suite) their product.
+
+    Ordered seed by seed, so a sweep stopped early has every (algo, env) at its first seeds."""
+    if suite is not None:
+        if suite not in suites.SUITES:
+            raise ValueError(f"unknown --suite {suite!r}; choose from {sorted(suites.SUITES)}")
+        cells = suites.SUITES[suite].cells()
+        return [
+            (a, e, s)
+            for a, e, s in cells
+            if (algos is None or a in algos) and (envs is None or e in envs) and (seeds is None or s in seeds)
+        ]
+    if not (algos and envs and seeds is not None):
+        raise ValueError("give --suite, or --algos, --envs and --seeds")
+    unknown = [a for a in algos if a not in suites.ALGOS]
+    if unknown:
+        raise ValueError(f"unknown --algos {unknown}; choose from {list(suites.ALGOS)}")
+    return [(a, e, int(s)) for s in seeds for e in envs for a in algos]
+
+
 def sweep(
-    algos: Sequence[str],
-    envs: Sequence[str],
-    seeds: Sequence[int],
-    episodes: int | dict[str, int],
+    algos: Sequence[str] | None = None,
+    envs: Sequence[str] | None = None,
+    seeds: Sequence[int] | None = None,
+    episodes: int | dict[str, int] | None = None,
+    suite: str | None = None,
     results_dir: str | Path = DEFAULT_RESULTS_DIR,
-    hyperparams_dir: str | Path = DEFAULT_HYPERPARAMS_DIR,
+    hyperparams_dirs: Sequence[str | Path] = (),
     workers: int = 1,
     ray_address: str | None = None,
     zoo_logs: bool = True,
     analysis: bool = True,
     verbose: int = 1,
 ) -> dict[str, list]:
-    """Run the missing (algo, env, seed) runs; return ``{"done", "skipped", "failed"}`` task lists.
+    """Run the missing runs of :func:`select_cells`; return ``{"done", "skipped", "failed"}`` task lists.
 
-    ``episodes`` is one budget for all envs or ``{env: budget}``. Runs are ordered seed by seed, so a sweep stopped
-    early has every (algo, env) at the first seeds.
+    ``episodes``: one budget for all envs, ``{env: budget}``, or None for each env's budget (``figure3_suites.BUDGETS``).
     """
-    unknown = [a for a in algos if a not in ALGOS]
-    if unknown:
-        raise ValueError(f"unknown --algos {unknown}; choose from {sorted(ALGOS)}")
-    budgets = {env: episodes for env in envs} if isinstance(episodes, int) else dict(episodes)
-    for env in envs:
-        if budgets.get(env, 0) < 1:
-            raise ValueError(f"--episodes for {env} must be >= 1, got {budgets.get(env)}")
+    cells = select_cells(suite, algos, envs, seeds)
+    if isinstance(episodes, int):
+        episodes = {e: episodes for _, e, _ in cells}
     results_dir = Path(results_dir)
     results_dir.mkdir(parents=True, exist_ok=True)
     status: dict[str, list] = {"done": [], "skipped": [], "failed": []}
     tasks = []
-    for seed in seeds:
-        for env in envs:
-            for algo in algos:
-                task = {
-                    "algo": algo,
-                    "env": env,
-                    "seed": int(seed),
-                    "episodes": int(budgets[env]),
-                    "hyperparams_dir": str(Path(hyperparams_dir).resolve()),
-                }
-                if run_paths(results_dir, algo, env, seed)[1].exists():
-                    status["skipped"].append(task)
-                else:
-                    tasks.append(task)
+    for algo, env, seed in cells:
+        budget = suites.budget(env, (episodes or {}).get(env))
+        if budget.episodes < 1:
+            raise ValueError(f"--episodes for {env} must be >= 1, got {budget.episodes}")
+        hyperparams, source = suites.load_hyperparams(algo, env, hyperparams_dirs)
+        task = {
+            "algo": algo,
+            "zoo_algo": suites.ALGOS[algo].zoo_algo,
+            "hyperparams": hyperparams,
+            "hyperparams_source": source,
+            "env": env,
+            "seed": int(seed),
+            "episodes": budget.episodes,
+            "eval_every": budget.eval_every,
+            "eval_episodes": budget.eval_episodes,
+            "eval_kwargs": dict(budget.eval_kwargs),
+        }
+        done_path = run_paths(results_dir, algo, env, seed)[1]
+        (status["skipped"] if done_path.exists() else tasks).append(task)
+    tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
     if verbose:
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
     sweep_info = {
-        "machine": machine_info(),
-        "algos": list(algos),
-        "envs": list(envs),
-        "seeds": [int(s) for s in seeds],
-        "episodes": budgets,
+        "git": figure3_run.git_state(),
+        "machine": figure3_run.machine_info(),
+        "load_average": os.getloadavg(),
+        "suite": suite,
+        "cells": [[a, e, s] for a, e, s in cells],
+        "episodes": {t["env"]: t["episodes"] for t in tasks + status["skipped"]},
         "workers": workers,
         "ray_address": ray_address,
         "started_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -333,8 +256,8 @@ def sweep(
                 m = result["meta"]
                 best = result["episodes"][-1]["best_so_far"] if result["episodes"] else float("nan")
                 print(
-                    f"done {t['algo']} {t['env']} seed {t['seed']}: {m['episodes']} episodes, {m['timesteps']} steps, "
-                    f"{m['wall_time']:.1f} s, best {best:.4g} ({m['hyperparams_source']})",
+                    f"{time.strftime('%H:%M:%S')} done {t['algo']} {t['env']} seed {t['seed']}: {m['episodes']} episodes, "
+                    f"{m['timesteps']} steps, {m['cpu_time']:.1f} CPU s, best {best:.4g} ({m['hyperparams_source']})",
                     flush=True,
                 )
 
@@ -350,8 +273,10 @@ def sweep(
     return status
 
 
-def parse_episodes(values: Sequence[str], envs: Sequence[str]) -> dict[str, int]:
-    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}`` for the selected envs."""
+def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = None) -> dict[str, int] | None:
+    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}``; envs without a value keep their budget."""
+    if not values:
+        return None
     default, per_env = None, {}
     for value in values:
         name, sep, number = value.rpartition("=")
@@ -361,10 +286,8 @@ def parse_episodes(values: Sequence[str], envs: Sequence[str]) -> dict[str, int]
             per_env[name] = int(number)
         else:
             default = int(number)
-    missing = [env for env in envs if env not in per_env and default is None]
-    if missing:
-        raise ValueError(f"--episodes: no budget for {missing}; give N or ENV=N")
-    return {env: per_env.get(env, default) for env in envs}  # type: ignore[misc]
+    names = set(envs or ()) | set(per_env) | set(suites.ENVS)
+    return {env: per_env.get(env, default) for env in names if per_env.get(env, default) is not None}
 
 
 def _exit_on_sigterm(signum: int, frame: Any) -> None:
@@ -374,31 +297,28 @@ def _exit_on_sigterm(signum: int, frame: Any) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algos", nargs="+", default=list(ALGOS), help=f"subset of {list(ALGOS)}")
+    parser.add_argument("--suite", default=None, help=f"one of {list(suites.SUITES)}")
+    parser.add_argument("--algos", nargs="+", default=None, help=f"subset of {list(suites.ALGOS)}")
+    parser.add_argument("--envs", nargs="+", default=None, help=f"short names {suites.ENVS} or any Gymnasium id")
+    parser.add_argument("--seeds", nargs="+", type=int, default=None)
     parser.add_argument(
-        "--envs", nargs="+", default=DEFAULT_ENVS, help=f"short names {list(fa.ENV_SPECS)} or any Gymnasium id"
-    )
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    parser.add_argument(
-        "--episodes",
-        nargs="+",
-        default=["60", "halfcheetah=20"],
-        help="episode budget of each run: N for all envs, ENV=N for one env (e.g. 60 halfcheetah=20)",
+        "--episodes", nargs="+", default=None, help="override the budgets: N for all envs, ENV=N for one (e.g. 5 pendulum=3)"
     )
     parser.add_argument("--results", default=str(DEFAULT_RESULTS_DIR), help="results folder")
-    parser.add_argument("--hyperparams", default=str(DEFAULT_HYPERPARAMS_DIR), help="folder of <algo>.yml files")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="process pool size (0: in this process)")
+    parser.add_argument("--hyperparams", nargs="*", default=[], help="folders searched first for <algo>.yml")
+    parser.add_argument("--workers", type=int, default=1, help="process pool size (0: in this process)")
     parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001', 'local')")
     parser.add_argument("--no-zoo-logs", action="store_true", help="do not write the zoo's evaluations.npz files")
-    parser.add_argument("--no-analysis", action="store_true", help="skip the plot and the tables at the end")
+    parser.add_argument("--no-analysis", action="store_true", help="skip the tables and plots at the end")
     args = parser.parse_args(argv)
     status = sweep(
         args.algos,
         args.envs,
         args.seeds,
         parse_episodes(args.episodes, args.envs),
+        suite=args.suite,
         results_dir=args.results,
-        hyperparams_dir=args.hyperparams,
+        hyperparams_dirs=args.hyperparams,
         workers=args.workers,
         ray_address=args.ray_address,
         zoo_logs=not args.no_zoo_logs,

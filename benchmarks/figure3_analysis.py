@@ -1,393 +1,262 @@
-"""Analysis of the Figure 3 data-efficiency sweep: best-so-far curves, tables, IQM with bootstrap intervals.
+"""Analysis of the benchmark sweep: tables (pandas), aggregates and verdicts (rliable), plots; one report per suite.
 
 Reads the per-run files written by ``benchmarks/figure3.py`` (``runs/<algo>/<env>/seed_<k>.csv`` + ``.json``) and writes,
-next to them: ``episodes.csv`` (all episodes, tidy), ``runs.csv`` (one line per run), ``figure3.png`` (one panel per
-env, median and quartiles of the best registered performance per episode, as in the paper's Figure 3) and
-``figure3.md`` (tables).
+next to them: ``episodes.csv`` (every episode, tidy), ``runs.csv`` (one line per run, with its measures), and for every
+suite with finished runs ``<suite>.md`` (tables, aggregates, verdicts), ``<suite>.png`` (curves),
+``<suite>_compute.png`` (best-so-far against CPU seconds) and ``<suite>_profile.png`` (performance profile);
+``all_runs.md`` covers every finished run.
 
-Usage: ``python benchmarks/figure3_analysis.py --results benchmarks/results/figure3``
+Usage: ``python benchmarks/figure3_analysis.py --results benchmarks/results/sweep``
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
+import ast
 import json
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
+import figure3_plots as plots
+import figure3_stats as st
+import figure3_verdicts as verdicts
 import numpy as np
+import pandas as pd
+from figure3_suites import ALGOS, SUITES, Suite, estimated_cost
 
-EPISODE_FIELDS = ("algo", "env", "seed", "episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time")
+from sb3_denfac.envs.facts import env_facts
 
-
-@dataclass(frozen=True)
-class EnvSpec:
-    """What the benchmark needs to know about an environment.
-
-    :param name: short name used on the command line and in file names.
-    :param gym_id: Gymnasium id.
-    :param lower_is_better: direction of the per-episode measure (Acrobot: steps to the goal).
-    :param threshold: "solved" level for the episodes-to-threshold table (``best < threshold`` when lower is better,
-        ``best >= threshold`` otherwise); ``None``: no threshold.
-    :param score_range: (worst, best) reference scores for normalisation to [0, 1] in the aggregate (IQM);
-        ``None``: min-max over all runs of the sweep on that env.
-    :param gamma: the paper's discount factor, used only when ``sb3_denfac/hyperparams/<algo>.yml`` has no entry.
-    :param label: panel title.
-    """
-
-    name: str
-    gym_id: str
-    lower_is_better: bool = False
-    threshold: float | None = None
-    score_range: tuple[float, float] | None = None
-    gamma: float | None = None
-    label: str = ""
-    notes: str = field(default="", compare=False)
+RUN_FIELDS = [
+    *("algo", "env", "seed", "episodes", "timesteps", "cpu_time", "eval_cpu_time", "wall_time", "final_best", "last10"),
+    *("final_eval", "episodes_to_threshold", "cpu_per_episode", "trained", "hyperparams_source", "commit"),
+]
 
 
-# Thresholds and normalisation references of the paper's three tasks (see docs/benchmark.md).
-ENV_SPECS: dict[str, EnvSpec] = {
-    "acrobot": EnvSpec(
-        "acrobot",
-        "sb3_denfac/ContinuousAcrobot-v0",
-        lower_is_better=True,
-        threshold=500.0,
-        score_range=(500.0, 0.0),
-        gamma=0.9,
-        label="Acrobot (steps to goal, lower is better)",
-        notes="threshold: the goal is reached at all (< 500 steps); score (500 - steps) / 500",
-    ),
-    "cartpole": EnvSpec(
-        "cartpole",
-        "sb3_denfac/ContinuousCartPole-v0",
-        threshold=-500.0,
-        score_range=(-1000.0, 0.0),
-        gamma=0.99,
-        label="CartPole (return, higher is better)",
-        notes="threshold: -500, i.e. the pole stays up for the 500 steps; score (return + 1000) / 1000",
-    ),
-    "halfcheetah": EnvSpec(
-        "halfcheetah",
-        "sb3_denfac/HalfCheetahPaper-v0",
-        threshold=50.0,
-        score_range=None,
-        gamma=0.99,
-        label="Half-Cheetah (return, higher is better)",
-        notes="threshold: return >= 50, i.e. runs forward (the initial near-zero policy stands still at |return| < 2); "
-        "score: min-max over the sweep",
-    ),
-}
+def _learning_starts(meta: dict) -> int:
+    with_value = meta.get("hyperparams", {}).get("learning_starts")
+    return int(ast.literal_eval(with_value)) if with_value is not None else 0
 
 
-def env_spec(name_or_id: str) -> EnvSpec:
-    """The spec of a short name or Gymnasium id; an unknown id gets a generic "higher is better" spec."""
-    if name_or_id in ENV_SPECS:
-        return ENV_SPECS[name_or_id]
-    for spec in ENV_SPECS.values():
-        if spec.gym_id == name_or_id:
-            return spec
-    return EnvSpec(name_or_id, name_or_id, label=name_or_id)
-
-
-def running_best(performance: Sequence[float] | np.ndarray, lower_is_better: bool) -> np.ndarray:
-    """Best registered performance since the first episode (NaN episodes are skipped)."""
-    perf = np.asarray(performance, dtype=np.float64)
-    if perf.size == 0:
-        return perf
-    fill = np.inf if lower_is_better else -np.inf
-    best = (np.minimum if lower_is_better else np.maximum).accumulate(np.where(np.isnan(perf), fill, perf))
-    return np.where(np.isinf(best), np.nan, best)
-
-
-def reached(values: np.ndarray, spec: EnvSpec) -> np.ndarray:
-    assert spec.threshold is not None
-    return values < spec.threshold if spec.lower_is_better else values >= spec.threshold
-
-
-def episodes_to_threshold(best: np.ndarray, spec: EnvSpec) -> float:
-    """First episode (1-based) whose best-so-far reaches the threshold, NaN if never."""
-    if spec.threshold is None or best.size == 0:
-        return float("nan")
-    hits = np.flatnonzero(reached(np.nan_to_num(best, nan=np.inf if spec.lower_is_better else -np.inf), spec))
-    return float(hits[0] + 1) if hits.size else float("nan")
-
-
-def interquartile_mean(x: np.ndarray) -> float:
-    """Mean of the middle 50% (25% trimmed each side), as in rliable's IQM."""
-    x = np.sort(np.asarray(x, dtype=np.float64).ravel())
-    n = x.size
-    if n == 0:
-        return float("nan")
-    cut = int(np.floor(0.25 * n))
-    middle = x[cut : n - cut] if n - 2 * cut > 0 else x
-    return float(middle.mean())
-
-
-def stratified_bootstrap_iqm(
-    scores_per_env: Iterable[np.ndarray], n_resamples: int = 2000, confidence: float = 0.95, seed: int = 0
-) -> tuple[float, float, float]:
-    """IQM over all (env, seed) scores with a percentile interval from a bootstrap that resamples seeds within each env."""
-    groups = [np.asarray(g, dtype=np.float64) for g in scores_per_env if len(g) > 0]
-    if not groups:
-        return float("nan"), float("nan"), float("nan")
-    point = interquartile_mean(np.concatenate(groups))
-    rng = np.random.default_rng(seed)
-    stats = np.empty(n_resamples)
-    for i in range(n_resamples):
-        stats[i] = interquartile_mean(np.concatenate([g[rng.integers(0, g.size, g.size)] for g in groups]))
-    alpha = (1.0 - confidence) / 2.0
-    low, high = np.quantile(stats, [alpha, 1.0 - alpha])
-    return point, float(low), float(high)
-
-
-# ----------------------------------------------------------------------------------------------------------------- loading
-
-
-@dataclass
-class Run:
-    algo: str
-    env: str
-    seed: int
-    meta: dict[str, Any]
-    episodes: list[dict[str, Any]]
-
-    def column(self, key: str) -> np.ndarray:
-        return np.array([float(e[key]) for e in self.episodes], dtype=np.float64)
-
-    def best(self) -> np.ndarray:
-        """Best registered performance per episode (recomputed from the raw measures)."""
-        return running_best(self.column("performance"), env_spec(self.env).lower_is_better)
-
-
-def load_runs(results_dir: str | Path) -> list[Run]:
-    """All finished runs (a run is finished when its ``.json`` exists; it is written after the ``.csv``)."""
-    runs = []
+def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(episodes, runs) of every finished run (a run is finished when its ``.json`` exists, written after its ``.csv``)."""
+    episode_frames, run_rows = [], []
     for meta_path in sorted(Path(results_dir, "runs").glob("*/*/seed_*.json")):
         meta = json.loads(meta_path.read_text())
-        with meta_path.with_suffix(".csv").open(newline="") as f:
-            episodes = list(csv.DictReader(f))
-        runs.append(Run(meta["algo"], meta["env"], int(meta["seed"]), meta, episodes))
-    return runs
+        eps = pd.read_csv(meta_path.with_suffix(".csv"))
+        eps.insert(0, "seed", int(meta["seed"]))
+        eps.insert(0, "env", meta["env"])
+        eps.insert(0, "algo", meta["algo"])
+        episode_frames.append(eps)
+        facts = env_facts(meta["env"])
+        hits = eps.loc[eps["best_so_far"].map(facts.reached), "episode"]
+        evaluations = meta.get("evaluations") or []
+        run_rows.append(
+            {
+                **{k: meta.get(k) for k in ("algo", "env", "seed", "timesteps", "cpu_time", "eval_cpu_time", "wall_time")},
+                "episodes": len(eps),
+                "final_best": float(eps["best_so_far"].iloc[-1]) if len(eps) else np.nan,
+                "last10": float(eps["performance"].tail(10).mean()),
+                "final_eval": float(np.mean(evaluations[-1]["scores"])) if evaluations else np.nan,
+                "episodes_to_threshold": float(hits.iloc[0]) if len(hits) else np.nan,
+                "cpu_per_episode": float(meta.get("cpu_time", np.nan)) / max(len(eps), 1),
+                # A run trained if its model updated at all: more steps than the warm-up, and a second episode.
+                "trained": bool(meta.get("timesteps", 0) > _learning_starts(meta) and len(eps) >= 2),
+                "hyperparams_source": meta.get("hyperparams_source", ""),
+                "commit": (meta.get("git") or {}).get("commit", "")[:10],
+            }
+        )
+    episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame()
+    return episodes, pd.DataFrame(run_rows, columns=RUN_FIELDS)
 
 
-def best_matrix(runs: list[Run], spec: EnvSpec, n_episodes: int | None = None) -> np.ndarray:
-    """(n_runs, n_episodes) best-so-far matrix, NaN-padded where a run has fewer episodes."""
-    curves = [r.best() for r in runs]
-    width = n_episodes or max((c.size for c in curves), default=0)
-    out = np.full((len(curves), width), np.nan)
-    for i, c in enumerate(curves):
-        out[i, : min(width, c.size)] = c[:width]
-    return out
+def _order(algos) -> list[str]:
+    known = list(ALGOS)
+    return sorted(set(algos), key=lambda a: (known.index(a) if a in known else len(known), a))
 
 
-def _group(runs: list[Run]) -> dict[str, dict[str, list[Run]]]:
-    grouped: dict[str, dict[str, list[Run]]] = {}
-    for r in sorted(runs, key=lambda r: (r.env, r.algo, r.seed)):
-        grouped.setdefault(r.env, {}).setdefault(r.algo, []).append(r)
-    return grouped
+def _env_order(envs) -> list[str]:
+    known = list(SUITES["figure3"].envs)
+    return sorted(set(envs), key=lambda e: (known.index(e) if e in known else len(known), e))
 
 
-def _env_order(envs: Iterable[str]) -> list[str]:
-    known = list(ENV_SPECS)
-    return sorted(envs, key=lambda e: (known.index(e) if e in known else len(known), e))
+def _quartiles(values: pd.Series, digits: int = 1) -> str:
+    values = values.dropna()
+    if values.empty:
+        return "–"
+    q1, med, q3 = values.quantile([0.25, 0.5, 0.75])
+    return f"{med:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
 
 
-ALGO_ORDER = ["denfac", "nfac", "ddpg", "cacla", "cmaes", "td3", "sac", "crossq"]
+def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
+    """One row per algorithm: runs, seeds, and median [Q1, Q3] of each measure, threshold reached, CPU cost."""
+    facts = env_facts(env)
+    rows = []
+    for algo in _order(runs.loc[runs["env"] == env, "algo"]):
+        r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
+        reached = r["episodes_to_threshold"].notna()
+        rows.append(
+            {
+                "algo": ALGOS[algo].label if algo in ALGOS else algo,
+                "runs (seeds)": f"{len(r)} ({_seed_list(r['seed'])})",
+                "best so far": _quartiles(r["final_best"]),
+                "last-10 mean": _quartiles(r["last10"]),
+                "deterministic eval (last)": _quartiles(r["final_eval"]),
+                "threshold: episodes (reached/runs)": (
+                    f"{r.loc[reached, 'episodes_to_threshold'].median():.0f} ({reached.sum()}/{len(r)})"
+                    if reached.any()
+                    else f"– (0/{len(r)})"
+                )
+                if facts.threshold is not None
+                else "",
+                "CPU s per run": _quartiles(r["cpu_time"], 0),
+                "CPU s per episode": _quartiles(r["cpu_per_episode"], 2),
+            }
+        )
+    return pd.DataFrame(rows)
 
 
-def _algo_order(algos: Iterable[str]) -> list[str]:
-    return sorted(algos, key=lambda a: (ALGO_ORDER.index(a) if a in ALGO_ORDER else len(ALGO_ORDER), a))
+def _seed_list(seeds: pd.Series) -> str:
+    s = sorted(int(x) for x in seeds)
+    return f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) and len(s) > 2 else ",".join(map(str, s))
 
 
-# ----------------------------------------------------------------------------------------------------------------- outputs
+def settings_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """What each algorithm was given on each env: the YAML entry the runs were built from."""
+    table = runs.groupby(["algo", "env"])["hyperparams_source"].agg(lambda s: "; ".join(sorted(set(s)))).unstack("env")
+    table = table.reindex(index=_order(table.index), columns=_env_order(table.columns)).fillna("–")
+    table.index = [ALGOS[a].label if a in ALGOS else a for a in table.index]
+    return table.rename_axis("algo").reset_index()
 
 
-def write_tidy(runs: list[Run], results_dir: Path) -> None:
-    with (results_dir / "episodes.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=EPISODE_FIELDS, extrasaction="ignore")
-        writer.writeheader()
-        for r in sorted(runs, key=lambda r: (r.env, r.algo, r.seed)):
-            for e in r.episodes:
-                writer.writerow({**e, "algo": r.algo, "env": r.env, "seed": r.seed})
-    run_fields = ["algo", "env", "seed", "episodes", "timesteps", "wall_time", "cpu_time", "final_best", "hyperparams_source"]
-    with (results_dir / "runs.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=run_fields)
-        writer.writeheader()
-        for r in sorted(runs, key=lambda r: (r.env, r.algo, r.seed)):
-            best = r.best()
-            writer.writerow(
-                {
-                    "algo": r.algo,
-                    "env": r.env,
-                    "seed": r.seed,
-                    "episodes": len(r.episodes),
-                    "timesteps": r.meta.get("timesteps"),
-                    "wall_time": round(float(r.meta.get("wall_time", float("nan"))), 2),
-                    "cpu_time": round(float(r.meta.get("cpu_time", float("nan"))), 2),
-                    "hyperparams_source": r.meta.get("hyperparams_source", ""),
-                    "final_best": best[-1] if best.size else "",
-                }
-            )
+def _md(df: pd.DataFrame) -> str:
+    return df.to_markdown(index=False) if not df.empty else "(no runs)"
 
 
-def plot_figure3(runs: list[Run], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    grouped = _group(runs)
-    envs = _env_order(grouped)
-    fig, axes = plt.subplots(1, max(1, len(envs)), figsize=(5.2 * max(1, len(envs)), 4.2), squeeze=False)
-    colors = plt.get_cmap("tab10")
-    all_algos = _algo_order({a for e in grouped.values() for a in e})
-    for ax, env in zip(axes[0], envs, strict=False):
-        spec = env_spec(env)
-        for algo in _algo_order(grouped[env]):
-            best = best_matrix(grouped[env][algo], spec)
-            x = np.arange(1, best.shape[1] + 1)
-            with np.errstate(all="ignore"):
-                q1, med, q3 = np.nanpercentile(best, [25, 50, 75], axis=0)
-            color = colors((ALGO_ORDER + all_algos).index(algo) % 10)  # one fixed colour per algorithm
-            label = f"{algo.upper()} (n={best.shape[0]})"
-            ax.plot(x, med, color=color, label=label, lw=2.2 if algo == "denfac" else 1.3, drawstyle="steps-post")
-            ax.fill_between(x, q1, q3, color=color, alpha=0.15, lw=0, step="post")
-        if spec.threshold is not None:
-            ax.axhline(spec.threshold, color="grey", ls=":", lw=1)
-        ax.set_title(spec.label or env)
-        ax.set_xlabel("episode")
-        ax.set_ylabel("best registered performance")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    fig.suptitle("Median and quartiles of the best registered performance (paper's Figure 3 layout)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
+    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the estimated CPU hours still needed
+    (``figure3_cost.py``'s plan)."""
+    done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
+    rows = {}
+    for algo in suite.algos:
+        want = suite.seeds(algo)
+        row, hours = {}, 0.0
+        for env in suite.envs:
+            left = sum((algo, env, s) not in done for s in want)
+            cost = left * estimated_cost(algo, env) / 3600
+            hours += cost
+            row[env] = f"{len(want) - left}/{len(want)}" + (f", {cost:.2f} h" if left and np.isfinite(cost) else "")
+        if hours != 0.0:
+            rows[ALGOS[algo].label] = {**row, "CPU hours left": f"{hours:.2f}"}
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
 
 
-def _fmt(x: float, digits: int = 1) -> str:
-    return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
-
-
-def normalised_final_scores(runs: list[Run]) -> dict[str, dict[str, np.ndarray]]:
-    """{algo: {env: normalised final best-so-far per seed}}, with each env's ``score_range`` or sweep min-max."""
-    grouped = _group(runs)
-    out: dict[str, dict[str, np.ndarray]] = {}
-    for env, by_algo in grouped.items():
-        spec = env_spec(env)
-        finals = {a: np.array([r.best()[-1] for r in rs]) for a, rs in by_algo.items()}
-        if spec.score_range is not None:
-            worst, best = spec.score_range
-        else:
-            pooled = np.concatenate(list(finals.values()))
-            pooled = pooled[np.isfinite(pooled)]
-            worst, best = (pooled.max(), pooled.min()) if spec.lower_is_better else (pooled.min(), pooled.max())
-        span = best - worst if best != worst else 1.0
-        for algo, vals in finals.items():
-            out.setdefault(algo, {})[env] = (vals - worst) / span
-    return out
-
-
-def summary_table(runs: list[Run]) -> list[str]:
-    """One line per algorithm: per env, median final best-so-far [Q1, Q3] and runs reaching the threshold."""
-    grouped = _group(runs)
-    envs = _env_order(grouped)
-    header = ["algo"] + [f"{env}: final best, median [Q1, Q3] (reached/runs)" for env in envs]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for algo in _algo_order({a for by_algo in grouped.values() for a in by_algo}):
-        cells = [algo]
-        for env in envs:
-            rs = grouped[env].get(algo, [])
-            finals = np.array([r.best()[-1] for r in rs]) if rs else np.array([])
-            finals = finals[np.isfinite(finals)]
-            if not finals.size:
-                cells.append("–")
-                continue
-            q1, med, q3 = np.percentile(finals, [25, 50, 75])
-            spec = env_spec(env)
-            hit = int(reached(finals, spec).sum()) if spec.threshold is not None else 0
-            cells.append(f"{_fmt(med)} [{_fmt(q1)}, {_fmt(q3)}] ({hit}/{len(rs)})")
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
-
-
-def markdown_report(runs: list[Run], checkpoints: Sequence[int] = (10, 20, 50, 100)) -> str:
-    grouped = _group(runs)
-    lines = ["# Figure 3 benchmark: best registered performance", "", "## Summary", ""]
-    lines += summary_table(runs) + [""]
-    for env in _env_order(grouped):
-        spec = env_spec(env)
-        by_algo = grouped[env]
-        n_max = max(len(r.episodes) for rs in by_algo.values() for r in rs)
-        cps = [c for c in checkpoints if c < n_max] + [n_max]
-        direction = "lower is better" if spec.lower_is_better else "higher is better"
-        lines += [f"## {env} (`{spec.gym_id}`, {direction})", ""]
-        if spec.threshold is not None:
-            op = "<" if spec.lower_is_better else ">="
-            lines += [f"Threshold: best-so-far {op} {spec.threshold:g}. {spec.notes}", ""]
-        header = ["algo", "runs"] + [f"median best @ep {c} [Q1, Q3]" for c in cps]
-        header += ["episodes to threshold (median; reached/runs)", "wall s per run (median)", "CPU s per run (median)"]
-        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        for algo in _algo_order(by_algo):
-            rs = by_algo[algo]
-            best = best_matrix(rs, spec, n_max)
-            cells = [algo, str(len(rs))]
-            for c in cps:
-                col = best[:, c - 1]
-                col = col[np.isfinite(col)]
-                if col.size:
-                    q1, med, q3 = np.percentile(col, [25, 50, 75])
-                    cells.append(f"{_fmt(med)} [{_fmt(q1)}, {_fmt(q3)}]")
-                else:
-                    cells.append("–")
-            ett = np.array([episodes_to_threshold(r.best(), spec) for r in rs])
-            hit = np.isfinite(ett)
-            cells.append(f"{_fmt(np.median(ett[hit]) if hit.any() else np.nan, 0)} ({hit.sum()}/{len(rs)})")
-            for key in ("wall_time", "cpu_time"):
-                cells.append(_fmt(np.median([float(r.meta.get(key, np.nan)) for r in rs])))
-            lines.append("| " + " | ".join(cells) + " |")
-        lines.append("")
-    # Aggregate: IQM over normalised final best-so-far, stratified bootstrap over seeds within envs.
-    scores = normalised_final_scores(runs)
-    lines += [
-        "## Aggregate: IQM of normalised final best-so-far",
-        "",
-        "Scores per env: Acrobot (500 - steps) / 500, CartPole (return + 1000) / 1000, other envs min-max over all runs of "
-        "the sweep (1 = best run). IQM over all (env, seed) scores; 95% percentile interval from 2000 bootstrap resamples "
-        "of the seeds within each env. Only algorithms run on the same set of envs are comparable.",
-        "",
-        "| algo | envs | runs | IQM | 95% CI |",
-        "|---|---|---|---|---|",
-    ]
-    for algo in _algo_order(scores):
-        by_env = scores[algo]
-        point, low, high = stratified_bootstrap_iqm(by_env.values())
-        n = sum(v.size for v in by_env.values())
-        envs = ", ".join(_env_order(by_env))
-        lines.append(f"| {algo} | {envs} | {n} | {_fmt(point, 3)} | [{_fmt(low, 3)}, {_fmt(high, 3)}] |")
-    lines.append("")
+def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, stem: str, suite: Suite | None = None) -> str:
+    """The markdown of one report; writes its three plots ``<stem>.png``, ``<stem>_compute.png``, ``<stem>_profile.png``."""
+    lines = [f"# {title}", ""]
+    if suite is not None:
+        missing = missing_cells(suite, runs)
+        lines += [f"Suite `{suite.name}`: {suite.description}.", ""]
+        lines += (
+            ["Cells not complete (finished/wanted seeds, estimated CPU hours to finish):", "", _md(missing), ""]
+            if not missing.empty
+            else ["Every cell is complete.", ""]
+        )
+    excluded = runs[~runs["trained"]]
+    if not excluded.empty:
+        lines += ["Runs left out because their model never trained (budget within the warm-up):", "",
+                  _md(excluded[["algo", "env", "seed", "timesteps", "hyperparams_source"]]), ""]  # fmt: skip
+    runs = runs[runs["trained"]]
+    if runs.empty:
+        return "\n".join([*lines, "No finished run has trained yet.", ""])
+    episodes = episodes.merge(runs[["algo", "env", "seed"]], on=["algo", "env", "seed"])
+    envs, algos = _env_order(runs["env"]), _order(runs["algo"])
+    commits = sorted(set(runs["commit"]))
+    lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
+    plots.curves(episodes, envs, algos, out / f"{stem}.png")
+    plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")
+    lines += [f"![curves]({stem}.png)", "", f"![compute]({stem}_compute.png)", ""]
+    lines += ["## What each algorithm was given (YAML entry per env)", "", _md(settings_table(runs)), ""]
+    for env in envs:
+        facts = env_facts(env)
+        direction = "lower is better" if facts.lower_is_better else "higher is better"
+        budget = int(runs.loc[runs["env"] == env, "episodes"].max())
+        lines += [f"## {env} (`{facts.gym_id}`, {facts.measure}, {direction}; {budget} episodes)", ""]
+        if facts.threshold is not None:
+            op = "<" if facts.lower_is_better else ">="
+            lines += [f"Threshold: best so far {op} {facts.threshold:g} ({facts.threshold_meaning}).", ""]
+        lines += [_md(env_table(runs, env)), ""]
+    lines += aggregates(runs, envs, out, stem)
+    if suite is None or suite.name == "figure3":
+        table = verdicts.verdict_table(runs)
+        if not table.empty:
+            lines += ["## Verdicts", "", verdicts.RULES, "", _md(table), ""]
     return "\n".join(lines)
 
 
+def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> list[str]:
+    """IQM (normalised, over envs) per measure, probability of improvement of DENFAC over each algorithm, profile."""
+    lines = ["## Aggregates over envs (rliable)", ""]
+    notes = [f"{e}: {env_facts(e).score_range}" if env_facts(e).score_range else f"{e}: min-max over these runs" for e in envs]
+    lines += ["Normalisation (worst, best) per env: " + "; ".join(notes) + ". Each algorithm's IQM uses the seeds it has on "
+              "every env listed; 95% stratified-bootstrap intervals.", ""]  # fmt: skip
+    for measure, meaning in st.MEASURES.items():
+        iqm = st.iqm_table(runs, envs, measure)
+        if iqm.empty:
+            continue
+        iqm = iqm.set_index("algo").loc[_order(iqm["algo"])].reset_index()
+        iqm["algo"] = [ALGOS[a].label if a in ALGOS else a for a in iqm["algo"]]
+        iqm["IQM [95% CI]"] = [
+            f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
+        ]
+        lines += [f"IQM of the normalised {meaning}:", "", _md(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
+    for denfac in ("denfac", "denfac_default"):
+        if denfac not in set(runs["algo"]):
+            continue
+        rows = []
+        for other in _order(runs["algo"]):
+            if other == denfac:
+                continue
+            row = {"other": ALGOS[other].label if other in ALGOS else other}
+            for measure in st.MEASURES:
+                shared = [e for e in envs if {denfac, other} <= set(runs.loc[runs["env"] == e, "algo"])]
+                p, lo, hi, na, nb = st.probability_of_improvement(runs, denfac, other, shared, measure)
+                row[f"P(improvement), {measure}"] = (
+                    f"{p:.2f} [{lo:.2f}, {hi:.2f}] ({na} vs {nb} seeds)" if np.isfinite(p) else "–"
+                )
+            rows.append(row)
+        lines += [f"Probability that {ALGOS[denfac].label} beats each algorithm, averaged over the envs both ran:", "",
+                  _md(pd.DataFrame(rows)), ""]  # fmt: skip
+    values = st.normalised(runs, "final_best")
+    scores = {a: st.score_matrix(runs, a, envs, values) for a in _order(runs["algo"])}
+    plots.performance_profile(
+        scores, out / f"{stem}_profile.png", "Performance profile: normalised best-so-far at the budget", st.REPS
+    )
+    lines += [f"![performance profile]({stem}_profile.png)", ""]
+    return lines
+
+
 def analyse(results_dir: str | Path) -> str:
-    """Write episodes.csv, runs.csv, figure3.png and figure3.md in ``results_dir``; return the markdown."""
-    results_dir = Path(results_dir)
-    runs = load_runs(results_dir)
-    if not runs:
-        raise FileNotFoundError(f"no finished runs under {results_dir / 'runs'}")
-    write_tidy(runs, results_dir)
-    plot_figure3(runs, results_dir / "figure3.png")
-    report = markdown_report(runs)
-    (results_dir / "figure3.md").write_text(report)
-    return report
+    """Write episodes.csv, runs.csv and the reports in ``results_dir``; return the ``all_runs`` markdown."""
+    out = Path(results_dir)
+    episodes, runs = load(out)
+    if runs.empty:
+        raise FileNotFoundError(f"no finished runs under {out / 'runs'}")
+    episodes.to_csv(out / "episodes.csv", index=False)
+    runs.to_csv(out / "runs.csv", index=False)
+    for suite in SUITES.values():
+        cells = {(a, e, s) for a, e, s in suite.cells()}
+        mine = runs[[c in cells for c in zip(runs["algo"], runs["env"], runs["seed"], strict=True)]]
+        if not mine.empty:
+            text = report(f"Benchmark suite `{suite.name}`", episodes, mine, out, suite.name, suite)
+            (out / f"{suite.name}.md").write_text(text)
+    text = report("All finished runs", episodes, runs, out, "all_runs")
+    (out / "all_runs.md").write_text(text)
+    return text
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--results", default=str(Path(__file__).parent / "results" / "figure3"), help="results folder")
+    parser.add_argument("--results", default=str(Path(__file__).parent / "results" / "sweep"), help="results folder")
     args = parser.parse_args(argv)
     print(analyse(args.results))
 

@@ -6,6 +6,9 @@ Registered ids (all with ``Box(-1, 1)`` float32 actions and ``info["paper_perfor
 - ``sb3_denfac/ContinuousCartPole-v0``: balance in a box, 500 steps, gamma 0.99, performance = episode return.
 - ``sb3_denfac/HalfCheetahPaper-v0``: HalfCheetah-v5 with the paper's reward, 500 steps, gamma 0.99,
   performance = episode return.
+- ``sb3_denfac/ContinuousAcrobot75-v0``: the Acrobot with the authors' episode length, 75 decisions (their code:
+  1500 ODE steps of 0.01 s, one decision per 20); the goal is reachable within it (``benchmarks/acrobot_horizon.py``
+  and its results in ``benchmarks/results/``).
 
 Each registered env is a reward wrapper (reusable on other envs with the same state) around a continuous-action
 base env, packed into one ``gymnasium.Env``.
@@ -32,6 +35,7 @@ from sb3_denfac.envs.common import (
     EpisodeRewardWrapper,
     PaperEnv,
 )
+from sb3_denfac.envs.facts import ENV_FACTS, EnvFacts, env_facts
 
 ENV_IDS = (
     "sb3_denfac/ContinuousAcrobot-v0",
@@ -67,8 +71,14 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+#: Variants of the paper's envs: id -> (entry point, constructor kwargs, episode length).
+ENV_VARIANTS = {
+    "sb3_denfac/ContinuousAcrobot75-v0": (_ENTRY_POINTS[0], {"episode_length": 75}, 75),
+}
+
+
 def register_envs() -> None:
-    """Register the paper's environments with Gymnasium (idempotent)."""
+    """Register the paper's environments and their variants with Gymnasium (idempotent)."""
     for env_id, entry_point in zip(ENV_IDS, _ENTRY_POINTS, strict=True):
         if env_id not in gymnasium.registry:
             gymnasium.register(
@@ -77,10 +87,21 @@ def register_envs() -> None:
                 max_episode_steps=DEFAULT_EPISODE_LENGTH,
                 additional_wrappers=(_EPISODE_LENGTH_WRAPPER,),
             )
+    for env_id, (entry_point, kwargs, length) in ENV_VARIANTS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point=entry_point,
+                max_episode_steps=length,
+                kwargs=kwargs,
+                additional_wrappers=(_EPISODE_LENGTH_WRAPPER,),
+            )
 
 
 __all__ = [
+    "ENV_FACTS",
     "ENV_IDS",
+    "ENV_VARIANTS",
     "PAPER_PERFORMANCE_KEY",
     "AcrobotSwingUpReward",
     "ContinuousAcrobotEnv",
@@ -88,6 +109,7 @@ __all__ = [
     "CartPoleBalanceReward",
     "ContinuousCartPoleEnv",
     "ContinuousCartPolePaperEnv",
+    "EnvFacts",
     "EpisodeLengthFromTimeLimit",
     "EpisodeRewardWrapper",
     "HalfCheetahContactEnv",
@@ -96,6 +118,7 @@ __all__ = [
     "PENALISED_GEOMS",
     "PaperEnv",
     "acrobot_tip_height",
+    "env_facts",
     "floor_contact_geoms",
     "register_envs",
 ]

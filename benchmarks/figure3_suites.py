@@ -1,0 +1,182 @@
+"""What the benchmark runs: algorithms, per-env budgets, suites, and the hyperparameters of each run.
+
+An *algorithm* here is a benchmark row: a zoo algorithm plus a YAML file (``denfac`` and ``denfac_default`` are the
+same class with different files). A *suite* is a set of (algorithm, env, seed) cells; suites share their runs, so a
+cell that two suites contain is trained once.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sb3_denfac.envs.facts import env_facts
+
+_HERE = Path(__file__).resolve().parent
+PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
+BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
+SWEEP_PLAN = _HERE / "results" / "sweep_plan.csv"  # estimated CPU seconds per run, written by figure3_cost.py
+
+
+@dataclass(frozen=True)
+class Algo:
+    """A benchmark row: ``zoo_algo`` built from ``<name>.yml``; ``label`` for tables and legends."""
+
+    name: str
+    zoo_algo: str
+    label: str
+    family: str  # "paper" (the paper's Figure 3 algorithms) or "peer" (what users pick today)
+
+
+ALGOS: dict[str, Algo] = {
+    a.name: a
+    for a in (
+        Algo("denfac", "denfac", "DENFAC (faithful)", "paper"),
+        Algo("denfac_default", "denfac", "DENFAC (default)", "paper"),
+        Algo("nfac", "nfac", "NFAC+", "paper"),
+        Algo("cacla", "cacla", "CACLA+", "paper"),
+        Algo("cmaes", "cmaes", "CMA-ES", "paper"),
+        Algo("ddpg", "ddpg", "DDPG (paper's)", "paper"),
+        Algo("td3", "td3", "SB3 TD3", "peer"),
+        Algo("sac", "sac", "SB3 SAC", "peer"),
+        Algo("crossq", "crossq", "sb3-contrib CrossQ", "peer"),
+    )
+}
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Episodes per run, and a deterministic evaluation of ``eval_episodes`` episodes every ``eval_every`` episodes on
+    the env made with ``eval_kwargs``."""
+
+    episodes: int
+    eval_every: int = 10
+    eval_episodes: int = 1  # 1 where the start state is deterministic (the evaluation is then deterministic too)
+    eval_kwargs: tuple[tuple[str, Any], ...] = ()
+
+
+BUDGETS: dict[str, Budget] = {
+    "acrobot": Budget(100, 10, 1),
+    # From CartPole's rest start a zero action balances forever (a near-zero initial actor would score a perfect 0):
+    # the evaluation starts from gymnasium's random state instead (uniform in +-0.05), as the authors tested from
+    # random states.
+    "cartpole": Budget(100, 10, 5, (("random_start", True),)),
+    "halfcheetah": Budget(100, 10, 3),
+    "pendulum": Budget(40, 10, 5),
+    "invertedpendulum": Budget(100, 10, 5),
+    "acrobot75": Budget(100, 10, 1),
+}
+ENVS = list(BUDGETS)
+GENERALISATION_ENVS = ("acrobot", "cartpole", "halfcheetah", "pendulum", "invertedpendulum")
+# A variant env takes the YAML entries of the env it varies (the YAML files are keyed by the paper's env ids).
+HYPERPARAMS_OF = {"acrobot75": "acrobot"}
+
+
+@dataclass(frozen=True)
+class Suite:
+    """Cells ``(algo, env, seed)``: every env of ``envs`` for each ``(algos, seeds)`` group."""
+
+    name: str
+    envs: tuple[str, ...]
+    groups: tuple[tuple[tuple[str, ...], tuple[int, ...]], ...]
+    description: str
+
+    @property
+    def algos(self) -> list[str]:
+        return [a for algos, _ in self.groups for a in algos]
+
+    def seeds(self, algo: str) -> tuple[int, ...]:
+        return next(seeds for algos, seeds in self.groups if algo in algos)
+
+    def cells(self) -> list[tuple[str, str, int]]:
+        """All cells, seed by seed (a sweep stopped early has every (algo, env) at its first seeds)."""
+        cells = [(a, e, s) for algos, seeds in self.groups for a in algos for e in self.envs for s in seeds]
+        return sorted(cells, key=lambda c: (c[2], self.envs.index(c[1]), list(ALGOS).index(c[0])))
+
+
+_PAPER = ("denfac", "denfac_default", "nfac", "cacla", "cmaes")
+_TEN, _FIVE = tuple(range(10)), tuple(range(5))
+SUITES: dict[str, Suite] = {
+    s.name: s
+    for s in (
+        Suite(
+            "figure3",
+            tuple(ENVS),
+            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq"), _FIVE)),
+            "the paper's Figure 3 comparison plus SB3 TD3/SAC and sb3-contrib CrossQ, on the paper's three envs, two "
+            "held-out Gymnasium envs, and the Acrobot with the authors' 75-decision episodes",
+        ),
+        Suite(
+            "generalisation",
+            GENERALISATION_ENVS,
+            ((("denfac_default", "denfac", "sac", "crossq"), _FIVE),),
+            "DENFAC's default and faithful configurations against SAC and CrossQ, library defaults, five envs",
+        ),
+        Suite(
+            "denfac_cartpole",
+            ("cartpole",),
+            ((("denfac",), _FIVE),),
+            "DENFAC with the paper's CartPole settings, 5 seeds x 100 episodes (formerly benchmarks/denfac_cartpole.py)",
+        ),
+    )
+}
+
+
+def budget(env: str, episodes: int | None = None) -> Budget:
+    """The env's budget (``episodes`` overrides its episode count); unknown envs: 100 episodes, 1 evaluation episode."""
+    base = BUDGETS.get(env, Budget(100))
+    return base if episodes is None else Budget(episodes, base.eval_every, base.eval_episodes, base.eval_kwargs)
+
+
+def _takes_gamma(algo: str) -> bool:
+    import inspect
+
+    from sb3_denfac.zoo import algorithm_class
+
+    zoo_algo = ALGOS[algo].zoo_algo if algo in ALGOS else algo
+    return "gamma" in inspect.signature(algorithm_class(zoo_algo).__init__).parameters
+
+
+def load_hyperparams(algo: str, env: str, dirs: Iterable[str | Path] = ()) -> tuple[dict[str, Any], str]:
+    """Zoo-style lookup of ``<algo>.yml`` in ``dirs``, then the package's folder, then ``benchmarks/configs``: the entry
+    of the env's Gymnasium id (of its base env for a variant, ``HYPERPARAMS_OF``), else ``default``. The env's
+    prescribed gamma (``ENV_FACTS``) is added when the entry sets none and the algorithm has one. Returns
+    (hyperparameters, source). Fails if no file or entry exists: every row states its settings."""
+    from sb3_denfac.zoo import load_config_file, select_entry
+
+    env_fact = env_facts(env)
+    entry_id = env_facts(HYPERPARAMS_OF.get(env, env)).gym_id
+    for folder in [*map(Path, dirs), PACKAGE_HYPERPARAMS_DIR, BENCHMARK_CONFIGS_DIR]:
+        path = folder / f"{algo}.yml"
+        if path.is_file():
+            break
+    else:
+        raise FileNotFoundError(
+            f"no {algo}.yml in {[str(d) for d in dirs]}, {PACKAGE_HYPERPARAMS_DIR} or {BENCHMARK_CONFIGS_DIR}"
+        )
+    config = load_config_file(path)
+    key = entry_id if entry_id in config else "default"
+    hyperparams = select_entry(config, entry_id, path)
+    source = f"{path.name}[{key}]"
+    if "gamma" not in hyperparams and env_fact.gamma is not None and _takes_gamma(algo):
+        hyperparams["gamma"] = env_fact.gamma
+        source += f" + the env's gamma {env_fact.gamma}"
+    return hyperparams, source
+
+
+@functools.cache
+def _cost_table() -> dict[tuple[str, str], float]:
+    import csv
+
+    if not SWEEP_PLAN.exists():
+        return {}
+    with SWEEP_PLAN.open(newline="") as f:
+        return {(r["algo"], r["env"]): float(r["estimate"]) for r in csv.DictReader(f)}
+
+
+def estimated_cost(algo: str, env: str) -> float:
+    """Estimated CPU seconds of one full run (``results/sweep_plan.csv``); NaN if not measured."""
+    return _cost_table().get((algo, env), float("nan"))
