@@ -57,13 +57,14 @@ class DENFAC(
     - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam
       (step 1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25
       actor steps per iteration, the actor and the critic kept across iterations and episodes, 64-64 networks without
-      batch norm and PyTorch's initialisation, sigma = 0.1 and no importance weights. The reasons, one per change from
-      the paper (ablations in ``benchmarks/results/denfac_ablation/``): a step of 0.1 with beta1 = 0 makes each step
-      about lr * sign(g), too coarse once Q is in the hundreds; a re-initialised actor gets only G steps to re-learn
-      pi from scratch, so the policy jumps between updates; the 50-7 critic with 10 full-batch steps per iteration is
-      under-fitted on returns of hundreds; with sigma small, min(1, pi/pi_b) is ~0 for nearly every sample once the
-      actor has moved, which throws most of D away (the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no
-      weight to evaluate pi: ``weighting="retrace"`` stays available).
+      batch norm and PyTorch's initialisation, sigma = 0.1 and no importance weights. Each change from the paper was
+      measured alone, on Pendulum-v1 and Half-Cheetah (``benchmarks/results/denfac_ablation/``); the ones that matter:
+      importance weights (with a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor has moved, which throws
+      the data away; the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no weight to evaluate pi), the
+      N(0, 0.01) initialisation without batch norm (the signal vanishes through the layers), re-initialising the
+      actor at every fitted iteration (G steps from scratch: the policy jumps between updates), too few critic steps
+      (the critic is under-fitted on returns in the hundreds), and the step 0.1 together with beta1 = 0 (each Adam
+      step is then about lr * sign(g)). Batch norm and the 50-7 critic cost less; sigma and D barely matter there.
     - **Paper** (``DENFAC("MlpPolicy", env, **presets.PAPER)``, and the zoo YAML entries of the paper's envs with
       Figure 5's per-env values): Algorithm 1 as written, with the authors' solver and networks.
 
