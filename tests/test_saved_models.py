@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_denfac import CACLA, CMAES, DDPG, DENFAC, NFAC
 
@@ -38,11 +39,16 @@ RATES = {"denfac": (1e-3, 1e-3), "ddpg": (2e-3, 1e-3), "nfac": (1e-3, 2e-3), "ca
 
 @pytest.mark.parametrize("name", list(RATES))
 def test_v0_2_optimizer_state_and_rates_are_restored(name: str) -> None:
-    """The saved Adam state (step counts) lands in ``policy.actor.optimizer`` / ``policy.critic.optimizer``, and each
-    network keeps its learning rate."""
-    model = ALGOS[name].load(DATA / f"{name}_v0.2_pendulum.zip", device="cpu")
+    """The saved Adam state (whatever name 0.2 gave it) lands in ``policy.actor.optimizer`` / ``policy.critic.optimizer``,
+    and each network keeps its learning rate."""
+    path = DATA / f"{name}_v0.2_pendulum.zip"
+    _, saved, _ = load_from_zip_file(path, device="cpu", load_data=False)
+    model = ALGOS[name].load(path, device="cpu")
     for net, rate in zip(("actor", "critic"), RATES[name], strict=True):
-        optimizer = getattr(model.policy, net).optimizer
-        assert optimizer.state, f"{name}: no Adam state restored in policy.{net}.optimizer"
-        assert all(float(state["step"]) > 0 for state in optimizer.state.values())
+        saved_state = next(saved[key] for key in (f"{net}.optimizer", f"policy.{net}_optimizer") if key in saved)
+        state = getattr(model.policy, net).optimizer.state_dict()
+        assert [float(s["step"]) for s in state["state"].values()] == [float(s["step"]) for s in saved_state["state"].values()]
+        for index, moments in saved_state["state"].items():
+            th.testing.assert_close(state["state"][index]["exp_avg"], moments["exp_avg"])
         assert getattr(model, f"{net}_lr_schedule")(0.5) == pytest.approx(rate)
+    assert any(saved[key]["state"] for key in saved if key != "policy"), "the fixture has no Adam state to compare"

@@ -30,12 +30,13 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import GymEnv, PyTorchObs, Schedule
-from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_learning_rate
+from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_positive
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
+from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -120,8 +121,19 @@ class DeterministicActorValuePolicy(BasePolicy):
 
         self.lr_schedule = lr_schedule
         self.critic_lr_schedule = critic_lr_schedule or lr_schedule
-        self.actor_optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
-        self.critic_optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
+        # As SB3's TD3/SAC: each network carries its optimizer (the features extractor with it, see actor_modules).
+        self.actor.optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
+        self.critic.optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
+
+    @property
+    def actor_optimizer(self) -> th.optim.Optimizer:
+        """Read-only alias of ``actor.optimizer`` (its name in sb3-denfac 0.2)."""
+        return self.actor.optimizer
+
+    @property
+    def critic_optimizer(self) -> th.optim.Optimizer:
+        """Read-only alias of ``critic.optimizer`` (its name in sb3-denfac 0.2)."""
+        return self.critic.optimizer
 
     def actor_modules(self) -> list[nn.Module]:
         """mu(s) as trained by the actor optimiser: its features extractor and MLP."""
@@ -159,9 +171,9 @@ class DeterministicActorValuePolicy(BasePolicy):
     def reset_critic(self) -> None:
         """Re-initialise V's MLP (weights and batch-norm statistics) and the critic optimiser state (NFAC's
         ``reset_critic``); a custom features extractor keeps its weights."""
-        lr = self.critic_optimizer.param_groups[0]["lr"]
+        lr = self.critic.optimizer.param_groups[0]["lr"]
         reset_parameters_(self.critic, self.init)
-        self.critic_optimizer = self._make_optimizer(self.critic_modules(), lambda _: lr)
+        self.critic.optimizer = self._make_optimizer(self.critic_modules(), lambda _: lr)
 
     def actor_mean(self, obs: PyTorchObs) -> th.Tensor:
         """mu(s): unbounded actor output in the scaled action space (the behaviour mean of the exploration)."""
@@ -272,7 +284,7 @@ class TransitionBuffer:
         )
 
 
-class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
@@ -282,6 +294,8 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
+        (:mod:`~sb3_denfac.common.learning_rates`).
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param sigma: exploration standard deviation in the [-1, 1]-scaled action space (paper: 0.05).
@@ -312,18 +326,12 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ):
-        check_positive("sigma", sigma)
-        check_gamma(gamma)
-        if max_grad_norm is not None:
-            check_positive("max_grad_norm", max_grad_norm)
-        rates = dict(
-            learning_rate=learning_rate, actor_learning_rate=actor_learning_rate, critic_learning_rate=critic_learning_rate
-        )
-        for name, lr in rates.items():
-            if lr is not None and not callable(lr):
-                check_positive(name, lr)
-                rates[name] = float(lr)  # SB3's schedules accept Python floats only (not numpy scalars from YAML/Optuna)
-        learning_rate = rates["learning_rate"]  # type: ignore[assignment]
+        sigma = check_sigma(sigma)
+        gamma = check_gamma(gamma)
+        max_grad_norm = check_positive("max_grad_norm", max_grad_norm, none_ok=True)
+        learning_rate = check_learning_rate("learning_rate", learning_rate)
+        if learning_rate is None:
+            raise ValueError("learning_rate must be a positive number or a schedule, got None")
         super().__init__(
             policy,
             env,
@@ -345,40 +353,31 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
             _init_setup_model=False,
             supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
         )
-        self.actor_learning_rate = rates["actor_learning_rate"]
-        self.critic_learning_rate = rates["critic_learning_rate"]
+        self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
+        self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.sigma = sigma
         if _init_setup_model:
             self._setup_model()
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
-        # alpha_a and alpha_c: each network's own rate, else SB3's learning_rate
-        self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate or self.learning_rate)
-        self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate or self.learning_rate)
         self.set_random_seed(self.seed)
         self.rollout_buffer = TransitionBuffer()
         self.policy = self.policy_class(  # type: ignore[assignment]
-            self.observation_space,
-            self.action_space,
-            self.actor_lr_schedule,
-            critic_lr_schedule=self.critic_lr_schedule,
-            sigma=self.sigma,
-            **self.policy_kwargs,
+            self.observation_space, self.action_space, self.lr_schedule, sigma=self.sigma, **self.policy_kwargs
         )
         self.policy = self.policy.to(self.device)
+        self._setup_actor_critic_schedules()  # alpha_a and alpha_c, see ActorCriticRatesMixin
         self.policy.set_training_mode(False)  # BN layers normalise with their running statistics, see refresh_bn_statistics
 
-    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        return ["policy", "policy.actor_optimizer", "policy.critic_optimizer"], []
+    #: sb3-denfac 0.2 saved the optimizers as policy attributes
+    _legacy_torch_names: ClassVar[dict[str, str]] = {
+        "policy.actor_optimizer": "policy.actor.optimizer",
+        "policy.critic_optimizer": "policy.critic.optimizer",
+    }
 
-    def _update_learning_rates(self) -> None:
-        """Apply the alpha_a and alpha_c schedules (SB3's ``_update_learning_rate`` handles a single schedule)."""
-        progress = self._current_progress_remaining
-        self.logger.record("train/actor_learning_rate", self.actor_lr_schedule(progress))
-        self.logger.record("train/critic_learning_rate", self.critic_lr_schedule(progress))
-        update_learning_rate(self.policy.actor_optimizer, self.actor_lr_schedule(progress))
-        update_learning_rate(self.policy.critic_optimizer, self.critic_lr_schedule(progress))
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "policy.actor.optimizer", "policy.critic.optimizer"], []
 
     def _gradient_step(self, loss: th.Tensor, optimizer: th.optim.Optimizer) -> None:
         """One step of ``optimizer`` (actor or critic, features extractor included) on ``loss``, norm-clipped."""

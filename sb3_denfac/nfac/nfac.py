@@ -153,7 +153,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
                 self.policy.refresh_bn_statistics(data.observations, exact_when_fresh=True, critic_only=True)
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
-                self._gradient_step(loss, self.policy.critic_optimizer)
+                self._gradient_step(loss, self.policy.critic.optimizer)
         return loss.item()
 
     def actor_targets(self, data: Transitions) -> tuple[th.Tensor, th.Tensor, float]:
@@ -179,7 +179,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             observations = data.observations[mask]
             for _ in range(self.actor_steps):
                 actor_loss = F.mse_loss(self.policy.actor_mean(observations), targets)
-                self._gradient_step(actor_loss, self.policy.actor_optimizer)
+                self._gradient_step(actor_loss, self.policy.actor.optimizer)
             loss = actor_loss.item()
         return loss, positive_fraction
 
