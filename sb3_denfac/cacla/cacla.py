@@ -46,7 +46,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.cacla.policies.CACLAPolicy`).
     :param env: environment or its registered id (one or several environments).
-    :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None.
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param n_steps: steps per environment per rollout: the logging period (learning is per step).

@@ -11,235 +11,28 @@ r + gamma * V(s') bootstraps from it with the critic of the moment the target is
 (``terminated`` in Gymnasium, the authors' ``goal_reached``) stop the bootstrap.
 
 Batch norm ("NFAC+", "CACLA+"): the policy stays in eval mode, also during the gradient steps, so BN layers normalise
-with their running statistics; those are refreshed from recent states by :func:`refresh_bn_statistics` (NFAC: the states
-of the episode(s) D before each update; CACLA: a window of the last steps before each per-step update). A batch of one
-is then well defined, and the function that is fitted is exactly the one that computes targets and acts.
+with their running statistics; those are refreshed from recent states by
+:func:`~sb3_denfac.common.actor_value_policy.refresh_bn_statistics` (NFAC: the states of the episode(s) D before each
+update; CACLA: a window of the last steps before each per-step update). A batch of one is then well defined, and the
+function that is fitted is exactly the one that computes targets and acts.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
-from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.preprocessing import get_action_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
-from stable_baselines3.common.type_aliases import GymEnv, PyTorchObs, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
-from torch import nn
 
+from sb3_denfac.common.actor_value_policy import DeterministicActorValuePolicy
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
-from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
-from sb3_denfac.common.truncated_normal import sample_truncated_normal
-
-
-class DeterministicActorValuePolicy(BasePolicy):
-    """Deterministic actor mu(s) (linear output in the [-1, 1]-scaled action space) and state-value critic V(s).
-
-    Both networks are :func:`~sb3_denfac.common.networks.create_bn_mlp` MLPs (leaky ReLU, batch norm before every linear
-    layer but the last, i.e. "except on the last two layers"). ``predict(deterministic=True)`` returns mu(s) clipped to
-    the action bounds; ``deterministic=False`` samples the truncated Gaussian exploration policy.
-
-    :param observation_space: observation space (Box, Discrete, MultiDiscrete or MultiBinary: SB3's preprocessing).
-    :param action_space: Box action space with finite bounds.
-    :param lr_schedule: actor learning rate alpha_a (schedule of the remaining progress).
-    :param critic_lr_schedule: critic learning rate alpha_c; defaults to ``lr_schedule``.
-    :param sigma: standard deviation of the truncated Gaussian exploration in the scaled space (paper: 0.05).
-    :param net_arch: hidden sizes, a list for both networks or ``dict(pi=[...], vf=[...])``
-        (default: actor [20] as the paper's Cartpole actor, critic [50, 7] as the paper's critics).
-    :param batch_norm: batch normalisation ("NFAC+", "CACLA+"); False gives plain MLPs.
-    :param activation_fn: hidden activation (paper: leaky ReLU).
-    :param bn_momentum: momentum of the batch-norm running statistics.
-    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch).
-    :param features_extractor_class: features extractor (default: flatten).
-    :param features_extractor_kwargs: its keyword arguments.
-    :param normalize_images: SB3 image normalisation flag.
-    :param optimizer_class: optimiser of both networks (default Adam).
-    :param optimizer_kwargs: its keyword arguments, except the learning rate.
-    :param share_features_extractor: one features extractor for actor and critic (trained by both optimisers, as SB3's
-        ActorCriticPolicy), else one each (``features_extractor`` is the actor's, ``vf_features_extractor`` the critic's).
-    """
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Schedule,
-        critic_lr_schedule: Schedule | None = None,
-        sigma: float = 0.05,
-        net_arch: list[int] | dict[str, list[int]] | None = None,
-        batch_norm: bool = True,
-        activation_fn: type[nn.Module] = nn.LeakyReLU,
-        bn_momentum: float = 0.1,
-        init: str = "paper",
-        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
-        features_extractor_kwargs: dict[str, Any] | None = None,
-        normalize_images: bool = True,
-        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
-        optimizer_kwargs: dict[str, Any] | None = None,
-        share_features_extractor: bool = True,
-    ):
-        super().__init__(
-            observation_space,
-            action_space,
-            features_extractor_class,
-            features_extractor_kwargs,
-            optimizer_class=optimizer_class,
-            optimizer_kwargs=optimizer_kwargs,
-            normalize_images=normalize_images,
-            squash_output=True,  # the actor works in [-1, 1]: predict() un-scales to the env bounds
-        )
-        if net_arch is None:
-            net_arch = dict(pi=[20], vf=[50, 7])
-        if isinstance(net_arch, dict):
-            pi_arch, vf_arch = list(net_arch.get("pi", [20])), list(net_arch.get("vf", [50, 7]))
-        else:
-            pi_arch, vf_arch = list(net_arch), list(net_arch)
-        self.net_arch = net_arch
-        self.sigma = sigma
-        self.batch_norm = batch_norm
-        self.activation_fn = activation_fn
-        self.bn_momentum = bn_momentum
-        self.init = init
-
-        # As SB3's ActorCriticPolicy: a shared extractor is trained by both optimisers, else each network has its own.
-        self.share_features_extractor = share_features_extractor
-        self.features_extractor = self.make_features_extractor()
-        self.vf_features_extractor = self.features_extractor if share_features_extractor else self.make_features_extractor()
-        features_dim = self.features_extractor.features_dim
-        mlp_kwargs = dict(batch_norm=batch_norm, activation_fn=activation_fn, bn_momentum=bn_momentum, init=init)
-        self.actor = create_bn_mlp(features_dim, get_action_dim(action_space), pi_arch, **mlp_kwargs)
-        self.critic = create_bn_mlp(features_dim, 1, vf_arch, **mlp_kwargs)
-
-        self.lr_schedule = lr_schedule
-        self.critic_lr_schedule = critic_lr_schedule or lr_schedule
-        # As SB3's TD3/SAC: each network carries its optimizer (the features extractor with it, see actor_modules).
-        self.actor.optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
-        self.critic.optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
-
-    @property
-    def actor_optimizer(self) -> th.optim.Optimizer:
-        """Read-only alias of ``actor.optimizer`` (its name in sb3-denfac 0.2)."""
-        return self.actor.optimizer
-
-    @property
-    def critic_optimizer(self) -> th.optim.Optimizer:
-        """Read-only alias of ``critic.optimizer`` (its name in sb3-denfac 0.2)."""
-        return self.critic.optimizer
-
-    def actor_modules(self) -> list[nn.Module]:
-        """mu(s) as trained by the actor optimiser: its features extractor and MLP."""
-        return [self.features_extractor, self.actor]
-
-    def critic_modules(self) -> list[nn.Module]:
-        """V(s) as trained by the critic optimiser: its features extractor and MLP."""
-        return [self.vf_features_extractor, self.critic]
-
-    def _make_optimizer(self, modules: list[nn.Module], schedule: Schedule) -> th.optim.Optimizer:
-        params = [p for module in modules for p in module.parameters()]
-        return self.optimizer_class(params, lr=schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(
-            dict(
-                lr_schedule=self._dummy_schedule,
-                critic_lr_schedule=self._dummy_schedule,
-                sigma=self.sigma,
-                net_arch=self.net_arch,
-                batch_norm=self.batch_norm,
-                activation_fn=self.activation_fn,
-                bn_momentum=self.bn_momentum,
-                init=self.init,
-                features_extractor_class=self.features_extractor_class,
-                features_extractor_kwargs=self.features_extractor_kwargs,
-                optimizer_class=self.optimizer_class,
-                optimizer_kwargs=self.optimizer_kwargs,
-                share_features_extractor=self.share_features_extractor,
-            )
-        )
-        return data
-
-    def reset_critic(self) -> None:
-        """Re-initialise V's MLP (weights and batch-norm statistics) and the critic optimiser state (NFAC's
-        ``reset_critic``); a custom features extractor keeps its weights."""
-        lr = self.critic.optimizer.param_groups[0]["lr"]
-        reset_parameters_(self.critic, self.init)
-        self.critic.optimizer = self._make_optimizer(self.critic_modules(), lambda _: lr)
-
-    def actor_mean(self, obs: PyTorchObs) -> th.Tensor:
-        """mu(s): unbounded actor output in the scaled action space (the behaviour mean of the exploration)."""
-        return self.actor(self.extract_features(obs, self.features_extractor))
-
-    def predict_values(self, obs: PyTorchObs) -> th.Tensor:
-        """V(s), shape (batch, 1)."""
-        return self.critic(self.extract_features(obs, self.vf_features_extractor))
-
-    @th.no_grad()
-    def refresh_bn_statistics(self, obs: PyTorchObs, exact_when_fresh: bool = False, critic_only: bool = False) -> None:
-        """Move the running statistics of the BN layers (features extractors included) toward those of ``obs`` by one
-        gradient-free train-mode forward; see :func:`refresh_bn_statistics`. Needs at least two observations."""
-        modules = self.critic_modules() if critic_only else [*self.actor_modules(), *self.critic_modules()]
-        modules = list(dict.fromkeys(modules))  # a shared extractor once
-
-        def forward() -> None:
-            self.predict_values(obs)
-            if not critic_only:
-                self.actor_mean(obs)
-
-        refresh_bn_statistics(modules, forward, len(obs), exact_when_fresh)  # type: ignore[arg-type]
-
-    def forward(self, obs: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        return self._predict(obs, deterministic=deterministic)
-
-    def explore(self, mean: np.ndarray) -> np.ndarray:
-        """Sample the truncated Gaussian N(mean, sigma^2) on [-1, 1] (scaled space)."""
-        return sample_truncated_normal(mean, self.sigma, np.float32(-1.0), np.float32(1.0))
-
-    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        mean = self.actor_mean(observation)
-        if deterministic:
-            return th.clamp(mean, -1.0, 1.0)
-        return th.as_tensor(self.explore(mean.cpu().numpy()), device=mean.device)
-
-
-@th.no_grad()
-def refresh_bn_statistics(
-    modules: list[nn.Module], forward: Callable[[], Any], n_inputs: int, exact_when_fresh: bool = False
-) -> None:
-    """Update the running statistics of the BN layers of ``modules`` with ``forward()`` run once in BN train mode.
-
-    The statistics move toward those of the forwarded batch with each layer's momentum; with ``exact_when_fresh``, a
-    layer that has never seen a batch (new or re-initialised network) takes them as they are. Needs ``n_inputs`` >= 2.
-    """
-    if n_inputs < 2:
-        return
-    fresh = [
-        m
-        for module in modules
-        for m in module.modules()
-        if exact_when_fresh and isinstance(m, nn.modules.batchnorm._BatchNorm) and m.num_batches_tracked == 0
-    ]
-    momenta = [m.momentum for m in fresh]
-    for layer in fresh:
-        layer.momentum = 1.0
-    for module in modules:
-        set_bn_training_mode(module, True)
-    try:
-        forward()
-    finally:
-        for module in modules:
-            set_bn_training_mode(module, False)
-        for layer, momentum in zip(fresh, momenta, strict=True):
-            layer.momentum = momentum
 
 
 def td_targets(rewards: th.Tensor, next_values: th.Tensor, terminals: th.Tensor, gamma: float) -> th.Tensor:
@@ -299,7 +92,15 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCr
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param sigma: exploration standard deviation in the [-1, 1]-scaled action space (paper: 0.05).
+    :param gamma: discount factor.
     :param max_grad_norm: clip of the global gradient L2 norm of each step (authors' code: 10); None disables it.
+    :param stats_window_size: episodes averaged in the rollout/ logs.
+    :param tensorboard_log: TensorBoard log directory (None: no logging).
+    :param policy_kwargs: extra arguments of the policy (net_arch, batch_norm, bn_momentum, init, optimizer_kwargs...).
+    :param verbose: 0 silent, 1 info, 2 debug.
+    :param seed: random seed.
+    :param device: torch device.
+    :param _init_setup_model: build the networks at construction.
     """
 
     policy: DeterministicActorValuePolicy  # type: ignore[assignment]
@@ -412,7 +213,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCr
         while not self._rollout_done(n_steps, n_episodes, n_rollout_steps):
             with th.no_grad():
                 means = self.policy.actor_mean(obs_as_tensor(self._last_obs, self.device)).cpu().numpy()  # type: ignore[arg-type]
-            actions = self.policy.explore(means)  # scaled to [-1, 1]
+            actions = self.policy.sample(means)  # scaled to [-1, 1]
             env_actions = self.policy.unscale_action(actions.reshape((-1, *self.action_space.shape)))  # flat -> Box shape
             new_obs, rewards, dones, infos = env.step(env_actions)
             self.num_timesteps += env.num_envs

@@ -23,7 +23,6 @@ from sb3_denfac.common.checks import (
     check_gamma,
     check_learning_rate,
     check_number,
-    check_positive,
     check_sigma,
 )
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
@@ -183,9 +182,9 @@ class DENFAC(
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ):
-        check_positive("n_fitted_iterations (K)", n_fitted_iterations, integer=True)
+        check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True)
         check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
-        check_positive("critic_steps", critic_steps, integer=True)
+        check_number("critic_steps", critic_steps, minimum=1, integer=True)
         check_choice("weighting", weighting, WEIGHTINGS)
         check_number("batch_size", batch_size, minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
         check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
