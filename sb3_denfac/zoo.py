@@ -222,8 +222,8 @@ def _matches(value: Any, hint: Any) -> bool:
         return isinstance(value, dict)
     if origin is typing.Literal:
         return value in typing.get_args(hint)
-    if origin is type or origin is Callable or hint is Callable:
-        return not isinstance(value, (bool, int, float))
+    if origin is type or origin is Callable or hint is Callable:  # a float-like string is YAML's 1e-3, not a schedule
+        return not isinstance(value, (bool, int, float)) and not (isinstance(value, str) and _looks_like_float(value))
     if isinstance(hint, type):
         # Objects (policies, noise, buffers, schedules): the zoo may build them from strings (class paths, eval).
         return isinstance(value, (hint, str)) if hint.__module__ != "builtins" else isinstance(value, hint)

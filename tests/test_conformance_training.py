@@ -39,15 +39,8 @@ def test_ddpg_train_freq(train_freq: Any) -> None:
 
 
 def _optimizers(model: BaseAlgorithm) -> list[th.optim.Optimizer]:
-    policy = model.policy
-    candidates = [getattr(policy, "optimizer", None), getattr(policy, "actor_optimizer", None)]
-    candidates += [getattr(policy, "critic_optimizer", None)]
-    candidates += [getattr(getattr(policy, net, None), "optimizer", None) for net in ("actor", "critic")]
-    found: list[th.optim.Optimizer] = []
-    for optimizer in candidates:
-        if isinstance(optimizer, th.optim.Optimizer) and all(optimizer is not seen for seen in found):
-            found.append(optimizer)
-    return found
+    """The optimizers, where every algorithm with an actor and a critic keeps them (docs/conventions.md)."""
+    return [model.policy.actor.optimizer, model.policy.critic.optimizer]
 
 
 @pytest.mark.parametrize("name", [name for name in ALGOS if name != "cmaes"])  # CMA-ES has no learning rate

@@ -14,8 +14,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from torch.nn import functional as F
 
 from sb3_denfac.cacla.policies import CACLAPolicy, MlpPolicy
-from sb3_denfac.common.checks import check_positive
-from sb3_denfac.common.networks import has_batch_norm
+from sb3_denfac.common.checks import check_number, check_positive
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
@@ -47,7 +46,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.cacla.policies.CACLAPolicy`).
     :param env: environment or its registered id (one or several environments).
-    :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None.
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param n_steps: steps per environment per rollout: the logging period (learning is per step).
@@ -89,9 +88,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         _init_setup_model: bool = True,
     ):
         check_positive("n_steps", n_steps, integer=True)
-        check_positive("bn_window", bn_window, integer=True)
-        if bn_window < 2:
-            raise ValueError(f"bn_window must be at least 2 (batch statistics of one sample are undefined), got {bn_window}")
+        check_number("bn_window", bn_window, minimum=2, integer=True, note=" (batch statistics of one sample are undefined)")
         super().__init__(
             policy,
             env,
@@ -118,7 +115,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         super()._setup_model()
         # States of the last bn_window steps (numpy, saved with the model so that a resumed run continues exactly)
         self._bn_states: deque[np.ndarray] = deque(getattr(self, "_bn_states", ()), maxlen=self.bn_window)
-        self._batch_norm = has_batch_norm(self.policy)
+        self._batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         self._reset_step_stats()
 
     def _excluded_save_params(self) -> list[str]:
@@ -148,13 +145,13 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         values = self.policy.predict_values(transitions.observations).flatten()
         positive = (targets - values.detach()) > 0  # delta computed with V_old, before the critic step
         critic_loss = F.mse_loss(values, targets)
-        self._gradient_step(critic_loss, self.policy.critic_optimizer)
+        self._gradient_step(critic_loss, self.policy.critic.optimizer)
         self._step_stats["critic_loss"].append(critic_loss.item())
         self._step_stats["positive"].append(positive.float().mean().item())
         if positive.any():
             means = self.policy.actor_mean(transitions.observations[positive])
             actor_loss = F.mse_loss(means, transitions.actions[positive])
-            self._gradient_step(actor_loss, self.policy.actor_optimizer)
+            self._gradient_step(actor_loss, self.policy.actor.optimizer)
             self._step_stats["actor_loss"].append(actor_loss.item())
         self._step_stats["time"].append(time.perf_counter() - start)
 

@@ -21,7 +21,7 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
 from sb3_denfac.common.budget import budget_reached
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import InputChecksMixin
+from sb3_denfac.common.checks import InputChecksMixin, check_choice, check_number, check_positive, check_sigma
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -126,21 +126,11 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
             seed=seed,
             supported_action_spaces=(spaces.Box,),
         )
-        if population_size is not None and (isinstance(population_size, bool) or int(population_size) < 2):
-            raise ValueError(f"population_size must be an integer >= 2 (or None for cma's default), got {population_size}")
-        if not np.isfinite(sigma0) or sigma0 <= 0:
-            raise ValueError(f"sigma0 (initial CMA-ES step size) must be a positive number, got {sigma0}")
-        if int(n_eval_episodes) < 1:
-            raise ValueError(f"n_eval_episodes must be >= 1, got {n_eval_episodes}")
-        if not np.isfinite(sigma) or sigma < 0:
-            raise ValueError(f"sigma (action noise std) must be >= 0 (0 = deterministic candidates), got {sigma}")
-        if incumbent not in INCUMBENTS:
-            raise ValueError(f"incumbent must be one of {INCUMBENTS}, got {incumbent!r}")
-        self.population_size = None if population_size is None else int(population_size)
-        self.sigma0 = float(sigma0)
-        self.n_eval_episodes = int(n_eval_episodes)
-        self.sigma = float(sigma)
-        self.incumbent = incumbent
+        self.population_size = check_number("population_size", population_size, minimum=2, integer=True, none_ok=True)
+        self.sigma0 = check_positive("sigma0 (initial CMA-ES step size)", sigma0)
+        self.n_eval_episodes = check_positive("n_eval_episodes", n_eval_episodes, integer=True)
+        self.sigma = check_sigma(sigma, zero_ok=True)  # 0 = deterministic candidates
+        self.incumbent = check_choice("incumbent", incumbent, INCUMBENTS)
         self.cma_options = dict(cma_options or {})
         # Search state (saved): the CMA-ES object, the unfinished generation, the best candidate so far.
         self.es: cma.CMAEvolutionStrategy | None = None

@@ -251,21 +251,73 @@ class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin)
 
 
 # ---------------------------------------------------------------------------------------------- hyperparameter checks
-def check_positive(name: str, value: float, integer: bool = False) -> None:
-    """Raise a ValueError naming ``name`` unless ``value`` is a positive number (an integer if ``integer``)."""
-    if integer and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
-    is_number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    if not integer and not (is_number and np.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
+# The one set of constructor-argument validators of the five algorithms: each raises a ValueError whose message starts
+# with the parameter's name and returns the value as the algorithm stores it (Python int/float: SB3's schedules and
+# JSON saving want Python scalars, not the numpy scalars YAML or Optuna may give).
 
 
-def check_learning_rate(name: str, value: Any) -> None:
-    """A learning rate is a positive number, a schedule (callable) or None (= follow ``learning_rate``)."""
-    if value is not None and not callable(value):
-        check_positive(name, value)
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
-def check_gamma(gamma: float) -> None:
-    if not 0.0 <= gamma <= 1.0:
-        raise ValueError(f"gamma (discount factor) must lie in [0, 1], got {gamma!r}")
+def check_number(
+    name: str,
+    value: Any,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    exclusive_minimum: bool = False,
+    integer: bool = False,
+    none_ok: bool = False,
+    note: str = "",
+) -> Any:
+    """``value`` as a Python int (``integer``) or float if it is a finite number in the bounds, else a ValueError naming
+    ``name``; ``None`` is returned as is when ``none_ok``. ``note`` is appended to the message (why the bound)."""
+    if value is None and none_ok:
+        return None
+    valid = _is_number(value) and bool(np.isfinite(value)) and (not integer or float(value).is_integer())
+    if valid and minimum is not None:
+        valid = value > minimum if exclusive_minimum else value >= minimum
+    if valid and maximum is not None:
+        valid = value <= maximum
+    if not valid:
+        bounds = []
+        if minimum is not None:
+            bounds.append(f"{'>' if exclusive_minimum else '>='} {minimum:g}")
+        if maximum is not None:
+            bounds.append(f"<= {maximum:g}")
+        requirement = " ".join(["an integer" if integer else "a number", " and ".join(bounds)]).strip()
+        alternatives = " (or None)" if none_ok else ""
+        raise ValueError(f"{name} must be {requirement}{alternatives}{note}, got {value!r}")
+    return int(value) if integer else float(value)
+
+
+def check_positive(name: str, value: Any, integer: bool = False, none_ok: bool = False) -> Any:
+    """A number > 0 (an integer >= 1 if ``integer``); see :func:`check_number`."""
+    if integer:
+        return check_number(name, value, minimum=1, integer=True, none_ok=none_ok)
+    return check_number(name, value, minimum=0, exclusive_minimum=True, none_ok=none_ok)
+
+
+def check_learning_rate(name: str, value: Any) -> Any:
+    """A learning rate: a positive number (returned as a float), a schedule of the remaining progress (a callable,
+    returned as is) or None (= follow ``learning_rate``)."""
+    return value if callable(value) else check_positive(name, value, none_ok=True)
+
+
+def check_gamma(gamma: Any) -> float:
+    """The discount factor gamma, in [0, 1]."""
+    return check_number("gamma (discount factor)", gamma, minimum=0, maximum=1)
+
+
+def check_sigma(sigma: Any, none_ok: bool = False, zero_ok: bool = False, name: str = "sigma") -> Any:
+    """The standard deviation of the truncated-Gaussian exploration, > 0 (>= 0 if ``zero_ok``; None if ``none_ok``)."""
+    note = " (exploration std of the truncated Gaussian)"
+    return check_number(name, sigma, minimum=0, exclusive_minimum=not zero_ok, none_ok=none_ok, note=note)
+
+
+def check_choice(name: str, value: Any, choices: tuple[Any, ...]) -> Any:
+    """One of ``choices``."""
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
+    return value

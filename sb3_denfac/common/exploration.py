@@ -10,7 +10,7 @@ Usage (the mixin must come first in the bases so its ``_sample_action`` wins)::
     class MyAlgo(TruncatedGaussianExplorationMixin, OffPolicyAlgorithm):
         def __init__(self, ..., sigma: float | None = 0.05, ...):
             ...
-            self.sigma = check_exploration_sigma(sigma)
+            self.sigma = check_sigma(sigma, none_ok=True)  # sb3_denfac.common.checks
 
 Stable API (other algorithms rely on it):
 
@@ -22,9 +22,9 @@ Stable API (other algorithms rely on it):
   in the scaled space, as output by the actor (not clamped: clamp with ``truncated_normal.clamp_mean`` or let
   ``truncated_normal_log_prob`` do it). Rows are NaN for uniform warm-up actions (see below). Not updated when
   ``sigma is None`` (SB3's own exploration).
-- ``_exploration_mean(obs) -> np.ndarray``: the deterministic actor output in the scaled space, unclipped; the default
-  uses ``self.policy._predict(obs, deterministic=True)``, which is right for SB3's TD3/DDPG/SAC actors and for
-  unbounded (inverting-gradient) actors. Override it if your policy's ``_predict`` does something else.
+- ``_exploration_mean(obs) -> np.ndarray``: the deterministic actor output mu(s) in the scaled space, unclipped: the
+  forward pass of ``self.policy.actor`` (SB3's convention for TD3/DDPG actors, whose ``forward`` returns mu(s) while
+  ``_predict`` may clip it), in eval mode. Override it only for a policy without such an ``actor``.
 - :func:`behaviour_log_prob`: log pi_b(a|s) for stored (action, behaviour mean) pairs, NaN means -> uniform density.
 
 Warm-up: while ``num_timesteps < learning_starts`` actions are drawn uniformly from the action space, like SB3
@@ -42,15 +42,6 @@ from gymnasium import spaces
 from stable_baselines3.common.noise import ActionNoise
 
 from sb3_denfac.common.truncated_normal import sample_truncated_normal, truncated_normal_log_prob
-
-
-def check_exploration_sigma(sigma: float | None, allow_none: bool = True) -> float | None:
-    """Validate the exploration standard deviation sigma (``None`` allowed when ``allow_none``)."""
-    if sigma is None and allow_none:
-        return None
-    if sigma is None or isinstance(sigma, bool) or not np.isfinite(float(sigma)) or float(sigma) <= 0:
-        raise ValueError(f"sigma (exploration std of the truncated Gaussian) must be a positive number, got {sigma!r}")
-    return float(sigma)
 
 
 def behaviour_log_prob(
@@ -92,7 +83,7 @@ class TruncatedGaussianExplorationMixin:
         self.policy.set_training_mode(False)
         obs_tensor, _ = self.policy.obs_to_tensor(observation)
         with th.no_grad():
-            mean = self.policy._predict(obs_tensor, deterministic=True)
+            mean = self.policy.actor(obs_tensor)
         return mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
 
     def _sample_action(

@@ -87,10 +87,6 @@ def set_bn_training_mode(module: nn.Module, mode: bool) -> None:
             layer.train(mode)
 
 
-def has_batch_norm(module: nn.Module) -> bool:
-    return any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in module.modules())
-
-
 def flat_parameters(module: nn.Module) -> th.Tensor:
     """All parameters of ``module`` as one detached 1-d tensor (for tests and the CMA-ES search space)."""
     return th.cat([p.detach().reshape(-1) for p in module.parameters()])

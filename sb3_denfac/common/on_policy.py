@@ -11,223 +11,28 @@ r + gamma * V(s') bootstraps from it with the critic of the moment the target is
 (``terminated`` in Gymnasium, the authors' ``goal_reached``) stop the bootstrap.
 
 Batch norm ("NFAC+", "CACLA+"): the policy stays in eval mode, also during the gradient steps, so BN layers normalise
-with their running statistics; those are refreshed from recent states by :func:`refresh_bn_statistics` (NFAC: the states
-of the episode(s) D before each update; CACLA: a window of the last steps before each per-step update). A batch of one
-is then well defined, and the function that is fitted is exactly the one that computes targets and acts.
+with their running statistics; those are refreshed from recent states by
+:func:`~sb3_denfac.common.actor_value_policy.refresh_bn_statistics` (NFAC: the states of the episode(s) D before each
+update; CACLA: a window of the last steps before each per-step update). A batch of one is then well defined, and the
+function that is fitted is exactly the one that computes targets and acts.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
-from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.preprocessing import get_action_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
-from stable_baselines3.common.type_aliases import GymEnv, PyTorchObs, Schedule
-from stable_baselines3.common.utils import FloatSchedule, obs_as_tensor, update_learning_rate
+from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
-from torch import nn
 
+from sb3_denfac.common.actor_value_policy import DeterministicActorValuePolicy
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_positive
-from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
-from sb3_denfac.common.truncated_normal import sample_truncated_normal
-
-
-class DeterministicActorValuePolicy(BasePolicy):
-    """Deterministic actor mu(s) (linear output in the [-1, 1]-scaled action space) and state-value critic V(s).
-
-    Both networks are :func:`~sb3_denfac.common.networks.create_bn_mlp` MLPs (leaky ReLU, batch norm before every linear
-    layer but the last, i.e. "except on the last two layers"). ``predict(deterministic=True)`` returns mu(s) clipped to
-    the action bounds; ``deterministic=False`` samples the truncated Gaussian exploration policy.
-
-    :param observation_space: observation space (Box, Discrete, MultiDiscrete or MultiBinary: SB3's preprocessing).
-    :param action_space: Box action space with finite bounds.
-    :param lr_schedule: actor learning rate alpha_a (schedule of the remaining progress).
-    :param critic_lr_schedule: critic learning rate alpha_c; defaults to ``lr_schedule``.
-    :param sigma: standard deviation of the truncated Gaussian exploration in the scaled space (paper: 0.05).
-    :param net_arch: hidden sizes, a list for both networks or ``dict(pi=[...], vf=[...])``
-        (default: actor [20] as the paper's Cartpole actor, critic [50, 7] as the paper's critics).
-    :param batch_norm: batch normalisation ("NFAC+", "CACLA+"); False gives plain MLPs.
-    :param activation_fn: hidden activation (paper: leaky ReLU).
-    :param bn_momentum: momentum of the batch-norm running statistics.
-    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch).
-    :param features_extractor_class: features extractor (default: flatten).
-    :param features_extractor_kwargs: its keyword arguments.
-    :param normalize_images: SB3 image normalisation flag.
-    :param optimizer_class: optimiser of both networks (default Adam).
-    :param optimizer_kwargs: its keyword arguments, except the learning rate.
-    :param share_features_extractor: one features extractor for actor and critic (trained by both optimisers, as SB3's
-        ActorCriticPolicy), else one each (``features_extractor`` is the actor's, ``vf_features_extractor`` the critic's).
-    """
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Schedule,
-        critic_lr_schedule: Schedule | None = None,
-        sigma: float = 0.05,
-        net_arch: list[int] | dict[str, list[int]] | None = None,
-        batch_norm: bool = True,
-        activation_fn: type[nn.Module] = nn.LeakyReLU,
-        bn_momentum: float = 0.1,
-        init: str = "paper",
-        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
-        features_extractor_kwargs: dict[str, Any] | None = None,
-        normalize_images: bool = True,
-        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
-        optimizer_kwargs: dict[str, Any] | None = None,
-        share_features_extractor: bool = True,
-    ):
-        super().__init__(
-            observation_space,
-            action_space,
-            features_extractor_class,
-            features_extractor_kwargs,
-            optimizer_class=optimizer_class,
-            optimizer_kwargs=optimizer_kwargs,
-            normalize_images=normalize_images,
-            squash_output=True,  # the actor works in [-1, 1]: predict() un-scales to the env bounds
-        )
-        if net_arch is None:
-            net_arch = dict(pi=[20], vf=[50, 7])
-        if isinstance(net_arch, dict):
-            pi_arch, vf_arch = list(net_arch.get("pi", [20])), list(net_arch.get("vf", [50, 7]))
-        else:
-            pi_arch, vf_arch = list(net_arch), list(net_arch)
-        self.net_arch = net_arch
-        self.sigma = sigma
-        self.batch_norm = batch_norm
-        self.activation_fn = activation_fn
-        self.bn_momentum = bn_momentum
-        self.init = init
-
-        # As SB3's ActorCriticPolicy: a shared extractor is trained by both optimisers, else each network has its own.
-        self.share_features_extractor = share_features_extractor
-        self.features_extractor = self.make_features_extractor()
-        self.vf_features_extractor = self.features_extractor if share_features_extractor else self.make_features_extractor()
-        features_dim = self.features_extractor.features_dim
-        mlp_kwargs = dict(batch_norm=batch_norm, activation_fn=activation_fn, bn_momentum=bn_momentum, init=init)
-        self.actor = create_bn_mlp(features_dim, get_action_dim(action_space), pi_arch, **mlp_kwargs)
-        self.critic = create_bn_mlp(features_dim, 1, vf_arch, **mlp_kwargs)
-
-        self.lr_schedule = lr_schedule
-        self.critic_lr_schedule = critic_lr_schedule or lr_schedule
-        self.actor_optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
-        self.critic_optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
-
-    def actor_modules(self) -> list[nn.Module]:
-        """mu(s) as trained by the actor optimiser: its features extractor and MLP."""
-        return [self.features_extractor, self.actor]
-
-    def critic_modules(self) -> list[nn.Module]:
-        """V(s) as trained by the critic optimiser: its features extractor and MLP."""
-        return [self.vf_features_extractor, self.critic]
-
-    def _make_optimizer(self, modules: list[nn.Module], schedule: Schedule) -> th.optim.Optimizer:
-        params = [p for module in modules for p in module.parameters()]
-        return self.optimizer_class(params, lr=schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(
-            dict(
-                lr_schedule=self._dummy_schedule,
-                critic_lr_schedule=self._dummy_schedule,
-                sigma=self.sigma,
-                net_arch=self.net_arch,
-                batch_norm=self.batch_norm,
-                activation_fn=self.activation_fn,
-                bn_momentum=self.bn_momentum,
-                init=self.init,
-                features_extractor_class=self.features_extractor_class,
-                features_extractor_kwargs=self.features_extractor_kwargs,
-                optimizer_class=self.optimizer_class,
-                optimizer_kwargs=self.optimizer_kwargs,
-                share_features_extractor=self.share_features_extractor,
-            )
-        )
-        return data
-
-    def reset_critic(self) -> None:
-        """Re-initialise V's MLP (weights and batch-norm statistics) and the critic optimiser state (NFAC's
-        ``reset_critic``); a custom features extractor keeps its weights."""
-        lr = self.critic_optimizer.param_groups[0]["lr"]
-        reset_parameters_(self.critic, self.init)
-        self.critic_optimizer = self._make_optimizer(self.critic_modules(), lambda _: lr)
-
-    def actor_mean(self, obs: PyTorchObs) -> th.Tensor:
-        """mu(s): unbounded actor output in the scaled action space (the behaviour mean of the exploration)."""
-        return self.actor(self.extract_features(obs, self.features_extractor))
-
-    def predict_values(self, obs: PyTorchObs) -> th.Tensor:
-        """V(s), shape (batch, 1)."""
-        return self.critic(self.extract_features(obs, self.vf_features_extractor))
-
-    @th.no_grad()
-    def refresh_bn_statistics(self, obs: PyTorchObs, exact_when_fresh: bool = False, critic_only: bool = False) -> None:
-        """Move the running statistics of the BN layers (features extractors included) toward those of ``obs`` by one
-        gradient-free train-mode forward; see :func:`refresh_bn_statistics`. Needs at least two observations."""
-        modules = self.critic_modules() if critic_only else [*self.actor_modules(), *self.critic_modules()]
-        modules = list(dict.fromkeys(modules))  # a shared extractor once
-
-        def forward() -> None:
-            self.predict_values(obs)
-            if not critic_only:
-                self.actor_mean(obs)
-
-        refresh_bn_statistics(modules, forward, len(obs), exact_when_fresh)  # type: ignore[arg-type]
-
-    def forward(self, obs: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        return self._predict(obs, deterministic=deterministic)
-
-    def explore(self, mean: np.ndarray) -> np.ndarray:
-        """Sample the truncated Gaussian N(mean, sigma^2) on [-1, 1] (scaled space)."""
-        return sample_truncated_normal(mean, self.sigma, np.float32(-1.0), np.float32(1.0))
-
-    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        mean = self.actor_mean(observation)
-        if deterministic:
-            return th.clamp(mean, -1.0, 1.0)
-        return th.as_tensor(self.explore(mean.cpu().numpy()), device=mean.device)
-
-
-@th.no_grad()
-def refresh_bn_statistics(
-    modules: list[nn.Module], forward: Callable[[], Any], n_inputs: int, exact_when_fresh: bool = False
-) -> None:
-    """Update the running statistics of the BN layers of ``modules`` with ``forward()`` run once in BN train mode.
-
-    The statistics move toward those of the forwarded batch with each layer's momentum; with ``exact_when_fresh``, a
-    layer that has never seen a batch (new or re-initialised network) takes them as they are. Needs ``n_inputs`` >= 2.
-    """
-    if n_inputs < 2:
-        return
-    fresh = [
-        m
-        for module in modules
-        for m in module.modules()
-        if exact_when_fresh and isinstance(m, nn.modules.batchnorm._BatchNorm) and m.num_batches_tracked == 0
-    ]
-    momenta = [m.momentum for m in fresh]
-    for layer in fresh:
-        layer.momentum = 1.0
-    for module in modules:
-        set_bn_training_mode(module, True)
-    try:
-        forward()
-    finally:
-        for module in modules:
-            set_bn_training_mode(module, False)
-        for layer, momentum in zip(fresh, momenta, strict=True):
-            layer.momentum = momentum
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
+from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 
 
 def td_targets(rewards: th.Tensor, next_values: th.Tensor, terminals: th.Tensor, gamma: float) -> th.Tensor:
@@ -272,7 +77,7 @@ class TransitionBuffer:
         )
 
 
-class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, OnPolicyAlgorithm):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
@@ -282,10 +87,20 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
 
     Arguments not listed in :class:`~stable_baselines3.common.on_policy_algorithm.OnPolicyAlgorithm`:
 
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
+        (:mod:`~sb3_denfac.common.learning_rates`).
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param sigma: exploration standard deviation in the [-1, 1]-scaled action space (paper: 0.05).
+    :param gamma: discount factor.
     :param max_grad_norm: clip of the global gradient L2 norm of each step (authors' code: 10); None disables it.
+    :param stats_window_size: episodes averaged in the rollout/ logs.
+    :param tensorboard_log: TensorBoard log directory (None: no logging).
+    :param policy_kwargs: extra arguments of the policy (net_arch, batch_norm, bn_momentum, init, optimizer_kwargs...).
+    :param verbose: 0 silent, 1 info, 2 debug.
+    :param seed: random seed.
+    :param device: torch device.
+    :param _init_setup_model: build the networks at construction.
     """
 
     policy: DeterministicActorValuePolicy  # type: ignore[assignment]
@@ -312,18 +127,12 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ):
-        check_positive("sigma", sigma)
-        check_gamma(gamma)
-        if max_grad_norm is not None:
-            check_positive("max_grad_norm", max_grad_norm)
-        rates = dict(
-            learning_rate=learning_rate, actor_learning_rate=actor_learning_rate, critic_learning_rate=critic_learning_rate
-        )
-        for name, lr in rates.items():
-            if lr is not None and not callable(lr):
-                check_positive(name, lr)
-                rates[name] = float(lr)  # SB3's schedules accept Python floats only (not numpy scalars from YAML/Optuna)
-        learning_rate = rates["learning_rate"]  # type: ignore[assignment]
+        sigma = check_sigma(sigma)
+        gamma = check_gamma(gamma)
+        max_grad_norm = check_positive("max_grad_norm", max_grad_norm, none_ok=True)
+        learning_rate = check_learning_rate("learning_rate", learning_rate)
+        if learning_rate is None:
+            raise ValueError("learning_rate must be a positive number or a schedule, got None")
         super().__init__(
             policy,
             env,
@@ -345,40 +154,31 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
             _init_setup_model=False,
             supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
         )
-        self.actor_learning_rate = rates["actor_learning_rate"]
-        self.critic_learning_rate = rates["critic_learning_rate"]
+        self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
+        self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.sigma = sigma
         if _init_setup_model:
             self._setup_model()
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
-        # alpha_a and alpha_c: each network's own rate, else SB3's learning_rate
-        self.actor_lr_schedule = FloatSchedule(self.actor_learning_rate or self.learning_rate)
-        self.critic_lr_schedule = FloatSchedule(self.critic_learning_rate or self.learning_rate)
         self.set_random_seed(self.seed)
         self.rollout_buffer = TransitionBuffer()
         self.policy = self.policy_class(  # type: ignore[assignment]
-            self.observation_space,
-            self.action_space,
-            self.actor_lr_schedule,
-            critic_lr_schedule=self.critic_lr_schedule,
-            sigma=self.sigma,
-            **self.policy_kwargs,
+            self.observation_space, self.action_space, self.lr_schedule, sigma=self.sigma, **self.policy_kwargs
         )
         self.policy = self.policy.to(self.device)
+        self._setup_actor_critic_schedules()  # alpha_a and alpha_c, see ActorCriticRatesMixin
         self.policy.set_training_mode(False)  # BN layers normalise with their running statistics, see refresh_bn_statistics
 
-    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        return ["policy", "policy.actor_optimizer", "policy.critic_optimizer"], []
+    #: sb3-denfac 0.2 saved the optimizers as policy attributes
+    _legacy_torch_names: ClassVar[dict[str, str]] = {
+        "policy.actor_optimizer": "policy.actor.optimizer",
+        "policy.critic_optimizer": "policy.critic.optimizer",
+    }
 
-    def _update_learning_rates(self) -> None:
-        """Apply the alpha_a and alpha_c schedules (SB3's ``_update_learning_rate`` handles a single schedule)."""
-        progress = self._current_progress_remaining
-        self.logger.record("train/actor_learning_rate", self.actor_lr_schedule(progress))
-        self.logger.record("train/critic_learning_rate", self.critic_lr_schedule(progress))
-        update_learning_rate(self.policy.actor_optimizer, self.actor_lr_schedule(progress))
-        update_learning_rate(self.policy.critic_optimizer, self.critic_lr_schedule(progress))
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "policy.actor.optimizer", "policy.critic.optimizer"], []
 
     def _gradient_step(self, loss: th.Tensor, optimizer: th.optim.Optimizer) -> None:
         """One step of ``optimizer`` (actor or critic, features extractor included) on ``loss``, norm-clipped."""
@@ -413,7 +213,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, OnPolic
         while not self._rollout_done(n_steps, n_episodes, n_rollout_steps):
             with th.no_grad():
                 means = self.policy.actor_mean(obs_as_tensor(self._last_obs, self.device)).cpu().numpy()  # type: ignore[arg-type]
-            actions = self.policy.explore(means)  # scaled to [-1, 1]
+            actions = self.policy.sample(means)  # scaled to [-1, 1]
             env_actions = self.policy.unscale_action(actions.reshape((-1, *self.action_space.shape)))  # flat -> Box shape
             new_obs, rewards, dones, infos = env.step(env_actions)
             self.num_timesteps += env.num_envs

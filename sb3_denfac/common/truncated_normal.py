@@ -15,13 +15,10 @@ import numpy as np
 import torch as th
 from scipy import special
 
+from sb3_denfac.common.checks import check_sigma
+
 #: How far outside the bounds (in units of sigma) a mean may lie before it is clamped (authors' code: 3).
 MEAN_CLAMP_SIGMAS = 3.0
-
-
-def _check_sigma(sigma: float) -> None:
-    if not np.isfinite(sigma) or sigma <= 0:
-        raise ValueError(f"sigma (exploration std of the truncated Gaussian) must be a positive number, got {sigma}")
 
 
 def clamp_mean(mean, low, high, sigma: float):
@@ -44,7 +41,7 @@ def sample_truncated_normal(
     :param rng: numpy random generator; defaults to the global ``np.random`` state, which SB3's ``set_random_seed`` seeds.
     :return: samples, always inside [low, high], same shape and dtype as ``mean``.
     """
-    _check_sigma(sigma)
+    check_sigma(sigma)
     mean64 = clamp_mean(np.asarray(mean, dtype=np.float64), np.asarray(low, np.float64), np.asarray(high, np.float64), sigma)
     alpha = (np.asarray(low, np.float64) - mean64) / sigma
     beta = (np.asarray(high, np.float64) - mean64) / sigma
@@ -63,7 +60,7 @@ def truncated_normal_log_prob(actions: th.Tensor, mean: th.Tensor, sigma: float,
 
     :return: tensor of shape (batch,) with log pi(a|s).
     """
-    _check_sigma(sigma)
+    check_sigma(sigma)
     dtype = th.float64
     a, mu = actions.to(dtype), clamp_mean(mean.to(dtype), low.to(dtype), high.to(dtype), sigma)
     lo, hi = low.to(dtype), high.to(dtype)

@@ -10,20 +10,28 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
-from stable_baselines3.common.utils import FloatSchedule, polyak_update, update_learning_rate
+from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.ddpg import DDPG as SB3DDPG
 from torch.nn import functional as F
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
-from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, check_exploration_sigma
+from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_number, check_sigma
+from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
+from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.networks import set_bn_training_mode
 from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
 
 
-class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, SB3DDPG):
+class DDPG(
+    InputChecksMixin,
+    ProgressBarMixin,
+    StopAtTotalTimestepsMixin,
+    ActorCriticRatesMixin,
+    TruncatedGaussianExplorationMixin,
+    SB3DDPG,
+):
     """Deep Deterministic Policy Gradient (Lillicrap et al. 2016) in the configuration the DENFAC paper compares with.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4, Figure 5: DDPG with
@@ -51,9 +59,10 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
     :param policy: policy class or "MlpPolicy" (:class:`sb3_denfac.ddpg.policies.DDPGPolicy`; policy_kwargs:
         ``net_arch=dict(pi=[...], qf=[50, 7])``, ``batch_norm``, ``init``, ``activation_fn``, ``tanh_output``)
     :param env: environment (Box action space) or its registered id
-    :param learning_rate: critic learning rate alpha_c (also the actor's unless ``actor_learning_rate`` is given);
-        float or schedule of the remaining progress
-    :param actor_learning_rate: actor learning rate alpha_a (None: same as ``learning_rate``)
+    :param learning_rate: the rate (float or schedule of the remaining progress) of each network whose own rate below
+        is None (:mod:`~sb3_denfac.common.learning_rates`)
+    :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``
+    :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``
     :param buffer_size: replay buffer size (FIFO)
     :param learning_starts: environment steps with uniform random actions before learning starts (the paper has none)
     :param batch_size: minibatch size (paper: 64); must be >= 2 with batch norm
@@ -73,7 +82,7 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
     :param n_steps: n-step returns (SB3's NStepReplayBuffer)
     :param tensorboard_log: TensorBoard log directory (logs train/actor_loss, train/critic_loss, train/q_value,
         train/actor_out_of_bounds (fraction of raw actor outputs outside [-1, 1]), train/actor_learning_rate,
-        train/learning_rate; with inverting gradients train/actor_loss is -mean Q, the inverted gradient having no
+        train/critic_learning_rate; with inverting gradients train/actor_loss is -mean Q, the inverted gradient having no
         scalar loss)
     :param policy_kwargs: keyword arguments of the policy
     :param verbose: verbosity level
@@ -91,6 +100,7 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
         env: GymEnv | str,
         learning_rate: float | Schedule = 1e-3,
         actor_learning_rate: float | Schedule | None = None,
+        critic_learning_rate: float | Schedule | None = None,
         buffer_size: int = 1_000_000,
         learning_starts: int = 100,
         batch_size: int = 64,
@@ -135,20 +145,19 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
             device=device,
             _init_setup_model=False,
         )
-        self.sigma = check_exploration_sigma(sigma)
-        self.actor_learning_rate = actor_learning_rate
+        self.sigma = check_sigma(sigma, none_ok=True)
+        self.learning_rate = check_learning_rate("learning_rate", learning_rate)
+        self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
+        self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.inverting_gradients = bool(inverting_gradients)
         if self.sigma is not None and action_noise is not None:
             raise ValueError("action_noise is only used with sigma=None (sigma > 0 selects truncated Gaussian exploration)")
-        check_learning_rate("learning_rate", learning_rate)
-        check_learning_rate("actor_learning_rate", actor_learning_rate)
-        if not 0.0 < tau <= 1.0:
-            raise ValueError(f"tau must be in (0, 1], got {tau}")
+        check_number("tau", tau, minimum=0, exclusive_minimum=True, maximum=1)
         check_gamma(gamma)
-        if batch_size < 1 or (batch_size < 2 and self.policy_kwargs.get("batch_norm", True)):
-            raise ValueError(f"batch_size must be >= 2 with batch norm (>= 1 without), got {batch_size}")
-        if gradient_steps == 0 or gradient_steps < -1:
-            raise ValueError(f"gradient_steps must be a positive integer or -1, got {gradient_steps}")
+        batch_norm = self.policy_kwargs.get("batch_norm", True)
+        check_number("batch_size", batch_size, minimum=2 if batch_norm else 1, integer=True, note=" (batch norm needs 2)")
+        if gradient_steps != -1:
+            check_number("gradient_steps", gradient_steps, minimum=1, integer=True, note=" (or -1: one per env step)")
         if issubclass(self.policy_class, DDPGPolicy):
             tanh_output = self.policy_kwargs.setdefault("tanh_output", not self.inverting_gradients)
             if self.inverting_gradients and tanh_output:
@@ -160,23 +169,11 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
 
     def _setup_model(self) -> None:
         super()._setup_model()
-        rate = self.learning_rate if self.actor_learning_rate is None else self.actor_learning_rate
-        self.actor_lr_schedule = FloatSchedule(rate)
-
-    def _exploration_mean(self, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        # Raw actor output (an unbounded actor's mean may lie outside [-1, 1]; the sampler clamps it at 3 sigma).
-        self.policy.set_training_mode(False)
-        obs_tensor, _ = self.policy.obs_to_tensor(observation)
-        with th.no_grad():
-            mean = self.actor(obs_tensor)
-        return mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
+        self._setup_actor_critic_schedules()
 
     def train(self, gradient_steps: int, batch_size: int = 64) -> None:
         self.policy.set_training_mode(True)
-        critic_lr = self.lr_schedule(self._current_progress_remaining)
-        actor_lr = self.actor_lr_schedule(self._current_progress_remaining)
-        update_learning_rate(self.critic.optimizer, critic_lr)
-        update_learning_rate(self.actor.optimizer, actor_lr)
+        self._update_learning_rates()
         low = th.tensor(-1.0, device=self.device)
         high = th.tensor(1.0, device=self.device)
 
@@ -227,13 +224,8 @@ class DDPG(InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, Trunca
             polyak_update(self.actor_batch_norm_stats, self.actor_batch_norm_stats_target, 1.0)
 
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/learning_rate", critic_lr)
-        self.logger.record("train/actor_learning_rate", actor_lr)
         if critic_losses:
             self.logger.record("train/critic_loss", float(np.mean(critic_losses)))
             self.logger.record("train/actor_loss", float(np.mean(actor_losses)))
             self.logger.record("train/q_value", float(np.mean(q_values)))
             self.logger.record("train/actor_out_of_bounds", float(np.mean(out_of_bounds)))
-
-    def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "actor_lr_schedule"]

@@ -16,67 +16,24 @@ from stable_baselines3.common.policies import BaseModel, ContinuousCritic
 from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor, get_actor_critic_arch
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
-from stable_baselines3.td3.policies import Actor, TD3Policy
+from stable_baselines3.td3.policies import TD3Policy
 from torch import nn
 
+from sb3_denfac.common.actor import DeterministicActor
 from sb3_denfac.common.networks import INITS, create_bn_mlp
 
 
-class BNActor(Actor):
-    """Deterministic actor mu(s) built by ``create_bn_mlp``; tanh-bounded or unbounded (linear) output.
+class BNActor(DeterministicActor):
+    """DDPG's mu(s): :class:`~sb3_denfac.common.actor.DeterministicActor` (always deterministic, as SB3's TD3 ``Actor``)
+    ending with a tanh unless ``tanh_output=False`` (inverting gradients)."""
 
-    :param observation_space: observation space
-    :param action_space: action space (Box)
-    :param net_arch: hidden layer sizes of the actor (paper: [5] Acrobot, [20] Cartpole, [20, 10] Half-Cheetah)
-    :param features_extractor: features extractor (flatten for vectors)
-    :param features_dim: size of the extracted features
-    :param activation_fn: hidden activation (paper: leaky ReLU)
-    :param normalize_images: divide images by 255
-    :param batch_norm: batch norm before every linear layer except the last (paper)
-    :param tanh_output: end with tanh (bounded, SB3 DDPG); False = linear output for inverting gradients
-    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch)
-    :param bn_momentum: momentum of the batch-norm running statistics
-    """
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        net_arch: list[int],
-        features_extractor: nn.Module,
-        features_dim: int,
-        activation_fn: type[nn.Module] = nn.LeakyReLU,
-        normalize_images: bool = True,
-        batch_norm: bool = True,
-        tanh_output: bool = True,
-        init: str = "paper",
-        bn_momentum: float = 0.1,
-    ):
-        # Skip Actor.__init__ (it builds SB3's tanh MLP); set what Actor's methods rely on.
-        BaseModel.__init__(
-            self, observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
-        )
-        self._squash_output = True  # predict() un-scales from [-1, 1]; _predict() clamps the unbounded output
-        self.net_arch = net_arch
-        self.features_dim = features_dim
-        self.activation_fn = activation_fn
-        self.batch_norm = batch_norm
-        self.tanh_output = tanh_output
-        self.init = init
-        self.bn_momentum = bn_momentum
-        net = create_bn_mlp(features_dim, get_action_dim(action_space), net_arch, batch_norm, activation_fn, bn_momentum, init)
-        self.mu = nn.Sequential(*net, nn.Tanh()) if tanh_output else net
+    def __init__(self, *args: Any, tanh_output: bool = True, **kwargs: Any):
+        super().__init__(*args, tanh_output=tanh_output, sigma=None, **kwargs)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
-        data.update(
-            dict(batch_norm=self.batch_norm, tanh_output=self.tanh_output, init=self.init, bn_momentum=self.bn_momentum)
-        )
+        del data["sigma"]  # always None
         return data
-
-    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        # Deterministic; an unbounded actor may leave [-1, 1]: the executed action is clamped.
-        return th.clamp(self(observation), -1.0, 1.0)
 
 
 class BNContinuousCritic(ContinuousCritic):

@@ -14,12 +14,19 @@ from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import update_learning_rate
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate
-from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob, check_exploration_sigma
+from sb3_denfac.common.checks import (
+    InputChecksMixin,
+    check_choice,
+    check_gamma,
+    check_learning_rate,
+    check_number,
+    check_sigma,
+)
+from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
+from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer
 from sb3_denfac.denfac.fast import FastUpdater, supported_networks
@@ -34,7 +41,12 @@ UPDATE_PATHS = ("auto", "fast", "plain")
 
 
 class DENFAC(
-    InputChecksMixin, ProgressBarMixin, StopAtTotalTimestepsMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm
+    InputChecksMixin,
+    ProgressBarMixin,
+    StopAtTotalTimestepsMixin,
+    ActorCriticRatesMixin,
+    TruncatedGaussianExplorationMixin,
+    OffPolicyAlgorithm,
 ):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
@@ -91,10 +103,10 @@ class DENFAC(
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
-    :param learning_rate: SB3 learning rate (float or schedule), used for a network whose own rate below is None
-        (paper, Figure 5: alpha_a = alpha_c = 0.1)
-    :param actor_learning_rate: alpha_a, Adam step size of the actor (takes precedence over ``learning_rate``)
-    :param critic_learning_rate: alpha_c, Adam step size of the critic (takes precedence over ``learning_rate``)
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
+        (:mod:`~sb3_denfac.common.learning_rates`; paper, Figure 5: alpha_a = alpha_c = 0.1)
+    :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``
+    :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``
     :param buffer_size: D, size of the FIFO replay buffer (paper: 3000-6000)
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
     :param batch_size: an int = one uniformly drawn mini-batch of that size per critic/actor step; None = full batch
@@ -142,8 +154,8 @@ class DENFAC(
         policy: str | type[DENFACPolicy],
         env: GymEnv | str,
         learning_rate: float | Schedule = 1e-3,
-        actor_learning_rate: float | None = None,
-        critic_learning_rate: float | None = None,
+        actor_learning_rate: float | Schedule | None = None,
+        critic_learning_rate: float | Schedule | None = None,
         buffer_size: int = 100_000,
         learning_starts: int = 0,
         batch_size: int | None = 256,
@@ -171,20 +183,19 @@ class DENFAC(
         device: th.device | str = "auto",
         _init_setup_model: bool = True,
     ):
-        self._check_arguments(n_fitted_iterations, actor_steps, critic_steps, weighting, batch_size, buffer_size)
+        check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True)
+        check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
+        check_number("critic_steps", critic_steps, minimum=1, integer=True)
+        check_choice("weighting", weighting, WEIGHTINGS)
+        check_number("batch_size", batch_size, minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
+        check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
         check_gamma(gamma)
-        for name, rate in (
-            ("learning_rate", learning_rate),
-            ("actor_learning_rate", actor_learning_rate),
-            ("critic_learning_rate", critic_learning_rate),
-        ):
-            check_learning_rate(name, rate)
+        learning_rate = check_learning_rate("learning_rate", learning_rate)
         if update_path == "compiled":
             raise ValueError(
                 "update_path='compiled' was removed in sb3-denfac 0.2 (measured no faster than 'fast' on CPU): use 'fast'"
             )
-        if update_path not in UPDATE_PATHS:
-            raise ValueError(f"update_path must be one of {UPDATE_PATHS}, got {update_path!r}")
+        check_choice("update_path", update_path, UPDATE_PATHS)
         super().__init__(
             policy,
             env,
@@ -214,9 +225,9 @@ class DENFAC(
             raise ValueError(
                 f"DENFAC updates at the end of every episode and needs a single environment, got n_envs={self.n_envs}"
             )
-        self.sigma = check_exploration_sigma(sigma, allow_none=False)
-        self.actor_learning_rate = actor_learning_rate
-        self.critic_learning_rate = critic_learning_rate
+        self.sigma = check_sigma(sigma)
+        self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
+        self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
         self.actor_steps = actor_steps
@@ -236,23 +247,6 @@ class DENFAC(
             self.policy_kwargs.setdefault(key, copy.deepcopy(value))
         if _init_setup_model:
             self._setup_model()
-
-    @staticmethod
-    def _check_arguments(
-        n_fitted_iterations: int, actor_steps: int, critic_steps: int, weighting: str, batch_size: int | None, buffer_size: int
-    ) -> None:
-        if int(n_fitted_iterations) < 1:
-            raise ValueError(f"n_fitted_iterations (K) must be >= 1, got {n_fitted_iterations}")
-        if int(actor_steps) < 0:
-            raise ValueError(f"actor_steps (G) must be >= 0, got {actor_steps}")
-        if int(critic_steps) < 1:
-            raise ValueError(f"critic_steps must be >= 1, got {critic_steps}")
-        if weighting not in WEIGHTINGS:
-            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
-        if batch_size is not None and int(batch_size) < 2:
-            raise ValueError(f"batch_size must be None (full batch) or >= 2 (batch norm), got {batch_size}")
-        if int(buffer_size) < 2:
-            raise ValueError(f"buffer_size (D) must be >= 2, got {buffer_size}")
 
     def _check_episode_length(self) -> None:
         """A buffer shorter than one episode would never hold a whole episode: refuse it when the length is known."""
@@ -277,11 +271,9 @@ class DENFAC(
             self.replay_buffer_class = DENFACReplayBuffer
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
             raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
-        self.policy_kwargs.update(
-            sigma=self.sigma,
-            actor_learning_rate=self.actor_learning_rate,
-            critic_learning_rate=self.critic_learning_rate,
-        )
+        self.policy_kwargs["sigma"] = self.sigma
+        for key in ("actor_learning_rate", "critic_learning_rate"):  # written by 0.1 and 0.2, now the algorithm's
+            self.policy_kwargs.pop(key, None)
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
         if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
             optimizer_kwargs.setdefault("betas", self.adam_betas)
@@ -290,21 +282,13 @@ class DENFAC(
         self.policy_kwargs.setdefault("bn_momentum", None)
         super()._setup_model()
         self._create_aliases()
+        self._setup_actor_critic_schedules()
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
         self.critic = self.policy.critic
 
     # ----- execution -----------------------------------------------------------------------------------------------
-    def _exploration_mean(self, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        """Unclipped actor mean mu(s), clamped to [-1 - 3 sigma, 1 + 3 sigma] as stored by the authors."""
-        self.policy.set_training_mode(False)
-        obs_tensor, _ = self.policy.obs_to_tensor(observation)
-        with th.no_grad():
-            mean = self.actor(obs_tensor)
-        mean_np = mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
-        return clamp_mean(mean_np, -1.0, 1.0, self.sigma)
-
     def _sample_action(
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -314,15 +298,14 @@ class DENFAC(
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
         assert isinstance(replay_buffer, DENFACReplayBuffer)
-        replay_buffer.stage_behaviour_means(self._last_behaviour_mean)  # type: ignore[arg-type]
+        # D stores mu_b(s) clamped to [-1 - 3 sigma, 1 + 3 sigma], as the authors' code (NaN warm-up rows stay NaN)
+        replay_buffer.stage_behaviour_means(clamp_mean(self._last_behaviour_mean, -1.0, 1.0, self.sigma))
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
         """Algorithm 1 over the whole replay buffer, ``gradient_steps`` times (DENFAC calls it once per episode)."""
-        for net, rate in ((self.actor, self.actor_learning_rate), (self.critic, self.critic_learning_rate)):
-            if rate is None:  # networks without their own rate follow SB3's learning_rate (schedule)
-                update_learning_rate(net.optimizer, self.lr_schedule(self._current_progress_remaining))
+        self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait

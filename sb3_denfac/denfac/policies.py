@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BaseModel, BasePolicy
@@ -18,98 +17,18 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, Flatten
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
+from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
-from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "qf": [50, 7]}
 
 
-class DENFACActor(BasePolicy):
-    """Deterministic actor mu(s) with a linear (unbounded) output in the scaled action space.
+class DENFACActor(DeterministicActor):
+    """DENFAC's mu(s): :class:`~sb3_denfac.common.actor.DeterministicActor` with a linear (unbounded) output, the
+    truncated Gaussian of ``sigma`` for ``predict(deterministic=False)`` and BN momentum None (cumulative average)."""
 
-    :param observation_space: observation space
-    :param action_space: Box action space
-    :param net_arch: hidden layer sizes
-    :param features_extractor: network extracting features (``nn.Flatten`` for vectors)
-    :param features_dim: number of features
-    :param activation_fn: hidden activation (paper: leaky ReLU)
-    :param batch_norm: batch normalisation before every linear layer but the last (paper)
-    :param bn_momentum: BatchNorm1d momentum (None: cumulative average, see DENFAC)
-    :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default"
-    :param sigma: std of the truncated Gaussian exploration (paper: 0.05), in the scaled action space
-    :param normalize_images: whether to normalise images (unused for vector observations)
-    """
-
-    action_space: spaces.Box
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        net_arch: list[int],
-        features_extractor: nn.Module,
-        features_dim: int,
-        activation_fn: type[nn.Module] = nn.LeakyReLU,
-        batch_norm: bool = True,
-        bn_momentum: float | None = None,
-        init: str = "paper",
-        sigma: float = 0.05,
-        normalize_images: bool = True,
-    ):
-        super().__init__(
-            observation_space,
-            action_space,
-            features_extractor=features_extractor,
-            normalize_images=normalize_images,
-            squash_output=True,  # predict() un-scales from [-1, 1]; _predict() returns actions inside [-1, 1]
-        )
-        self.net_arch = net_arch
-        self.features_dim = features_dim
-        self.activation_fn = activation_fn
-        self.batch_norm = batch_norm
-        self.bn_momentum = bn_momentum
-        self.init = init
-        self.sigma = sigma
-        action_dim = get_action_dim(self.action_space)
-        self.mu = create_bn_mlp(
-            features_dim,
-            action_dim,
-            net_arch,
-            batch_norm,
-            activation_fn,
-            bn_momentum,
-            init,  # type: ignore[arg-type]
-        )
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(
-            dict(
-                net_arch=self.net_arch,
-                features_dim=self.features_dim,
-                activation_fn=self.activation_fn,
-                batch_norm=self.batch_norm,
-                bn_momentum=self.bn_momentum,
-                init=self.init,
-                sigma=self.sigma,
-                features_extractor=self.features_extractor,
-            )
-        )
-        return data
-
-    def forward(self, obs: th.Tensor) -> th.Tensor:
-        """Unbounded mean mu(s) in the scaled action space."""
-        return self.mu(self.extract_features(obs, self.features_extractor))
-
-    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        mean = self(observation)
-        if deterministic:
-            return mean.clamp(-1.0, 1.0)
-        return th.as_tensor(self.sample(mean.cpu().numpy()), device=mean.device)
-
-    def sample(self, mean: np.ndarray) -> np.ndarray:
-        """Truncated Gaussian N(mean, sigma^2) on [-1, 1] (numpy, seeded by SB3 through ``np.random``)."""
-        return sample_truncated_normal(mean, self.sigma, -1.0, 1.0)
+    def __init__(self, *args: Any, bn_momentum: float | None = None, sigma: float | None = 0.05, **kwargs: Any):
+        super().__init__(*args, bn_momentum=bn_momentum, sigma=sigma, **kwargs)
 
 
 class DENFACCritic(BaseModel):
@@ -172,8 +91,9 @@ class DENFACPolicy(BasePolicy):
         reset of the running statistics (DENFAC resets them at every fit, so eval mode uses the buffer's statistics)
     :param init: "paper" (N(0, 0.01^2)) or "default" (PyTorch) initialisation
     :param sigma: exploration std of the truncated Gaussian on [-1, 1]
-    :param actor_learning_rate: alpha_a (overrides ``lr_schedule`` for the actor if not None)
-    :param critic_learning_rate: alpha_c (overrides ``lr_schedule`` for the critic if not None)
+    :param actor_learning_rate: initial rate of the actor if not None (else ``lr_schedule(1)``); the algorithm sets
+        alpha_a before each update (:mod:`~sb3_denfac.common.learning_rates`), this serves policies used alone
+    :param critic_learning_rate: the same for the critic (alpha_c)
     :param features_extractor_class: features extractor (default: flatten)
     :param features_extractor_kwargs: its keyword arguments
     :param normalize_images: whether to normalise images
@@ -195,8 +115,8 @@ class DENFACPolicy(BasePolicy):
         bn_momentum: float | None = None,
         init: str = "paper",
         sigma: float = 0.05,
-        actor_learning_rate: float | None = None,
-        critic_learning_rate: float | None = None,
+        actor_learning_rate: float | Schedule | None = None,
+        critic_learning_rate: float | Schedule | None = None,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
         features_extractor_kwargs: dict[str, Any] | None = None,
         normalize_images: bool = True,
@@ -215,13 +135,7 @@ class DENFACPolicy(BasePolicy):
         )
         if net_arch is None:
             net_arch = dict(DEFAULT_NET_ARCH)
-        if isinstance(net_arch, dict):
-            pi_arch, qf_arch = (
-                list(net_arch.get("pi", DEFAULT_NET_ARCH["pi"])),
-                list(net_arch.get("qf", DEFAULT_NET_ARCH["qf"])),
-            )
-        else:
-            pi_arch, qf_arch = list(net_arch), list(net_arch)
+        archs = parse_net_arch(net_arch, DEFAULT_NET_ARCH)
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.batch_norm = batch_norm
@@ -239,8 +153,8 @@ class DENFACPolicy(BasePolicy):
             init=init,
             normalize_images=normalize_images,
         )
-        self.actor_kwargs = {**common, "net_arch": pi_arch, "sigma": sigma}
-        self.critic_kwargs = {**common, "net_arch": qf_arch}
+        self.actor_kwargs = {**common, "net_arch": archs["pi"], "sigma": sigma}
+        self.critic_kwargs = {**common, "net_arch": archs["qf"]}
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
@@ -249,8 +163,9 @@ class DENFACPolicy(BasePolicy):
         self.actor.optimizer = self.make_optimizer(self.actor, self.actor_learning_rate, lr_schedule)
         self.critic.optimizer = self.make_optimizer(self.critic, self.critic_learning_rate, lr_schedule)
 
-    def make_optimizer(self, net: nn.Module, rate: float | None, lr_schedule: Schedule) -> th.optim.Optimizer:
-        lr = rate if rate is not None else lr_schedule(1)
+    def make_optimizer(self, net: nn.Module, rate: float | Schedule | None, lr_schedule: Schedule) -> th.optim.Optimizer:
+        rate = lr_schedule if rate is None else rate
+        lr = rate(1) if callable(rate) else rate
         return self.optimizer_class(net.parameters(), lr=lr, **self.optimizer_kwargs)  # type: ignore[call-arg]
 
     def _get_constructor_parameters(self) -> dict[str, Any]:

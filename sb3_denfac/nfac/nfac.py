@@ -44,13 +44,13 @@ class NFAC(DeterministicOnPolicyAlgorithm):
     e.g. after ``reset_critic``, takes the statistics of D as they are). The function that is fitted is then exactly
     the one that computes the targets, the TD errors and the actions. (Train-mode BN on the batch of one short episode,
     and on the positive-delta subset for the actor, learns a function of batch-normalised inputs whose scale does not
-    carry over to eval mode: on a 10-step task the learned actions were several times worse.)
+    carry over to eval mode.)
 
     :param policy: policy class or "MlpPolicy" (:class:`~sb3_denfac.nfac.policies.NFACPolicy`).
     :param env: environment or its registered id, one or several: a rollout ends when ``n_episodes`` episodes have
         ended in all, and the episodes still running in the other environments enter the update as they are (their
         last transition bootstraps) and go on in the next rollout.
-    :param learning_rate: learning rate (float or schedule) of each network whose own rate below is None.
+    :param learning_rate: the rate (float or schedule) of each network whose own rate below is None.
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``.
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``.
     :param n_episodes: episodes finished per update, over all environments (authors: 1).
@@ -153,7 +153,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
                 self.policy.refresh_bn_statistics(data.observations, exact_when_fresh=True, critic_only=True)
             for _ in range(self.critic_steps):
                 loss = F.mse_loss(self.policy.predict_values(data.observations).flatten(), targets)
-                self._gradient_step(loss, self.policy.critic_optimizer)
+                self._gradient_step(loss, self.policy.critic.optimizer)
         return loss.item()
 
     def actor_targets(self, data: Transitions) -> tuple[th.Tensor, th.Tensor, float]:
@@ -179,7 +179,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             observations = data.observations[mask]
             for _ in range(self.actor_steps):
                 actor_loss = F.mse_loss(self.policy.actor_mean(observations), targets)
-                self._gradient_step(actor_loss, self.policy.actor_optimizer)
+                self._gradient_step(actor_loss, self.policy.actor.optimizer)
             loss = actor_loss.item()
         return loss, positive_fraction
 

@@ -1,0 +1,71 @@
+"""One meaning of the learning rates, and one place for the optimizers, in the algorithms with an actor and a critic.
+
+- ``learning_rate`` (a float or a schedule of the remaining progress, as in SB3) is the rate of every network that has
+  no rate of its own.
+- ``actor_learning_rate`` and ``critic_learning_rate`` (a float, a schedule or None) are the paper's alpha_a and alpha_c
+  (section 4): each overrides ``learning_rate`` for its network.
+- The optimizers are ``policy.actor.optimizer`` and ``policy.critic.optimizer``, as in SB3's TD3 and SAC.
+
+:class:`ActorCriticRatesMixin` turns the three arguments into ``actor_lr_schedule`` and ``critic_lr_schedule`` and applies
+them to the two optimizers (SB3's ``_update_learning_rate`` applies the single ``lr_schedule`` to a list of optimizers).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from stable_baselines3.common.save_util import load_from_zip_file
+from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.common.utils import FloatSchedule, update_learning_rate
+
+NETWORKS = ("actor", "critic")
+
+
+class ActorCriticRatesMixin:
+    """``actor_lr_schedule`` / ``critic_lr_schedule`` from ``learning_rate`` and the per-network rates (module doc).
+
+    The host sets ``learning_rate``, ``actor_learning_rate`` and ``critic_learning_rate``, calls
+    :meth:`_setup_actor_critic_schedules` once the policy exists and :meth:`_update_learning_rates` before each update.
+    """
+
+    learning_rate: float | Schedule
+    actor_learning_rate: float | Schedule | None
+    critic_learning_rate: float | Schedule | None
+    actor_lr_schedule: Schedule
+    critic_lr_schedule: Schedule
+    policy: Any
+    logger: Any
+    _current_progress_remaining: float
+    #: torch save names of earlier versions -> their names now (see :meth:`set_parameters`).
+    _legacy_torch_names: dict[str, str] = {}
+
+    def _setup_actor_critic_schedules(self) -> None:
+        """Build the two schedules and give each optimizer its initial rate (the rate at progress remaining 1)."""
+        for net in NETWORKS:
+            own = getattr(self, f"{net}_learning_rate", None)
+            setattr(self, f"{net}_lr_schedule", FloatSchedule(self.learning_rate if own is None else own))
+        self._apply_learning_rates(1.0)
+
+    def _apply_learning_rates(self, progress_remaining: float) -> dict[str, float]:
+        rates = {}
+        for net in NETWORKS:
+            rates[net] = getattr(self, f"{net}_lr_schedule")(progress_remaining)
+            update_learning_rate(getattr(self.policy, net).optimizer, rates[net])
+        return rates
+
+    def _update_learning_rates(self) -> None:
+        """Apply alpha_a and alpha_c at the current progress and log them (``train/actor_learning_rate``...)."""
+        for net, rate in self._apply_learning_rates(self._current_progress_remaining).items():
+            self.logger.record(f"train/{net}_learning_rate", rate)
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "actor_lr_schedule", "critic_lr_schedule"]  # type: ignore[misc]
+
+    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True, device: Any = "auto") -> None:
+        """SB3's ``set_parameters``, also for files saved with the torch names of earlier versions
+        (``_legacy_torch_names``, e.g. NFAC's ``policy.actor_optimizer`` of 0.2, now ``policy.actor.optimizer``)."""
+        params = load_path_or_dict
+        if not isinstance(params, dict):
+            _, params, _ = load_from_zip_file(params, device=device, load_data=False)
+        params = {self._legacy_torch_names.get(name, name): value for name, value in params.items()}
+        super().set_parameters(params, exact_match=exact_match, device=device)  # type: ignore[misc]

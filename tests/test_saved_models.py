@@ -1,0 +1,54 @@
+"""Models saved by sb3-denfac 0.2 (before the optimizers moved to ``policy.actor.optimizer`` and the actors were merged
+into one class) still load, with the same state-dict keys, predict as when they were saved, and train on.
+
+The files in tests/data/ were written by ``tests/data/make_v0.2_fixtures.py`` run on the 0.2 code (commit dedb04a)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.save_util import load_from_zip_file
+
+from sb3_denfac import CACLA, CMAES, DDPG, DENFAC, NFAC
+
+DATA = Path(__file__).parent / "data"
+ALGOS = {"denfac": DENFAC, "ddpg": DDPG, "nfac": NFAC, "cacla": CACLA, "cmaes": CMAES}
+EXPECTED = json.loads((DATA / "v0.2_pendulum_expected.json").read_text())
+
+
+@pytest.mark.parametrize("name", list(ALGOS))
+def test_v0_2_model_loads_predicts_and_trains(name: str) -> None:
+    model = ALGOS[name].load(DATA / f"{name}_v0.2_pendulum.zip", device="cpu")
+    assert sorted(model.policy.state_dict().keys()) == EXPECTED[name]["keys"]
+    obs = np.asarray(EXPECTED["obs"], dtype=np.float32)
+    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], np.asarray(EXPECTED[name]["actions"]), rtol=1e-5)
+    model.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
+    model.learn(100, reset_num_timesteps=False)
+    assert all(th.isfinite(p).all() for p in model.policy.parameters())
+
+
+#: (actor, critic) rates the fixtures were saved with; DDPG's ``learning_rate`` then meant the critic's (it still does
+#: when ``critic_learning_rate`` is None, the new meaning: the rate of each network without its own).
+RATES = {"denfac": (1e-3, 1e-3), "ddpg": (2e-3, 1e-3), "nfac": (1e-3, 2e-3), "cacla": (1e-3, 2e-3)}
+
+
+@pytest.mark.parametrize("name", list(RATES))
+def test_v0_2_optimizer_state_and_rates_are_restored(name: str) -> None:
+    """The saved Adam state (whatever name 0.2 gave it) lands in ``policy.actor.optimizer`` / ``policy.critic.optimizer``,
+    and each network keeps its learning rate."""
+    path = DATA / f"{name}_v0.2_pendulum.zip"
+    _, saved, _ = load_from_zip_file(path, device="cpu", load_data=False)
+    model = ALGOS[name].load(path, device="cpu")
+    for net, rate in zip(("actor", "critic"), RATES[name], strict=True):
+        saved_state = next(saved[key] for key in (f"{net}.optimizer", f"policy.{net}_optimizer") if key in saved)
+        state = getattr(model.policy, net).optimizer.state_dict()
+        assert [float(s["step"]) for s in state["state"].values()] == [float(s["step"]) for s in saved_state["state"].values()]
+        for index, moments in saved_state["state"].items():
+            th.testing.assert_close(state["state"][index]["exp_avg"], moments["exp_avg"])
+        assert getattr(model, f"{net}_lr_schedule")(0.5) == pytest.approx(rate)
+    assert any(saved[key]["state"] for key in saved if key != "policy"), "the fixture has no Adam state to compare"
