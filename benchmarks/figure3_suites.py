@@ -131,6 +131,17 @@ def budget(env: str, episodes: int | None = None) -> Budget:
     return base if episodes is None else Budget(episodes, base.eval_every, base.eval_episodes, base.eval_kwargs)
 
 
+def _paper_denfac() -> dict[str, Any]:
+    from sb3_denfac.denfac.presets import paper
+
+    return paper()
+
+
+#: Rows whose package YAML states the paper's settings only for the paper's envs (its ``default`` entry is the
+#: library's general default): on any other env they use this preset, so "DENFAC (faithful)" stays Algorithm 1.
+PRESET_ELSEWHERE: dict[str, Any] = {"denfac": _paper_denfac}  # the one preset: presets.PAPER
+
+
 def _takes_gamma(algo: str) -> bool:
     import inspect
 
@@ -158,9 +169,13 @@ def load_hyperparams(algo: str, env: str, dirs: Iterable[str | Path] = ()) -> tu
             f"no {algo}.yml in {[str(d) for d in dirs]}, {PACKAGE_HYPERPARAMS_DIR} or {BENCHMARK_CONFIGS_DIR}"
         )
     config = load_config_file(path)
-    key = entry_id if entry_id in config else "default"
-    hyperparams = select_entry(config, entry_id, path)
-    source = f"{path.name}[{key}]"
+    if algo in PRESET_ELSEWHERE and entry_id not in config:
+        hyperparams = {"policy": "MlpPolicy", **PRESET_ELSEWHERE[algo]()}
+        source = f"sb3_denfac.denfac.presets.PAPER (no {path.name} entry)"
+    else:
+        key = entry_id if entry_id in config else "default"
+        hyperparams = select_entry(config, entry_id, path)
+        source = f"{path.name}[{key}]"
     if "gamma" not in hyperparams and env_fact.gamma is not None and _takes_gamma(algo):
         hyperparams["gamma"] = env_fact.gamma
         source += f" + the env's gamma {env_fact.gamma}"

@@ -125,12 +125,11 @@ class DENFAC(
     :param adam_eps: Adam epsilon (authors: 1e-8)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
-    :param update_path: which :class:`~sb3_denfac.denfac.updaters.Updater` carries out Algorithm 1: "auto" (default:
-        "fast" when the policy allows it, else "plain"), "fast" (:class:`~sb3_denfac.denfac.fast.FastUpdater`:
-        hand-written steps on flat parameters with preallocated buffers and fused Adam; needs vector observations, the
-        default MLP networks and Adam) or "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`: autograd on
-        the modules, any policy). Both compute the same update up to float rounding; their cost is measured in
-        ``benchmarks/results/update_cost.md``. Models saved with the removed "compiled" path load with "fast".
+    :param update_path: the :class:`~sb3_denfac.denfac.updaters.Updater` of Algorithm 1: "fast"
+        (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations, the
+        default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or
+        "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
+        ``benchmarks/results/update_cost.md``). Models saved with the removed "compiled" path load with "fast".
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
