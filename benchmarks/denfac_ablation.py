@@ -125,7 +125,8 @@ FACTORS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     "D": (dict(buffer_size=6000), dict(buffer_size=100_000)),
     "bn": (dict(policy_kwargs=dict(batch_norm=True)), dict(policy_kwargs=dict(batch_norm=False))),
     "weight": (dict(weighting="retrace"), dict(weighting="none")),
-    "timeout": (dict(bootstrap_on_timeout=True), dict(bootstrap_on_timeout=False)),  # "good" side = paper-era terminal
+    # library default True (SB3 semantics) for both faithful and good; the ablation is the paper-era False
+    "timeout": (dict(bootstrap_on_timeout=False), dict(bootstrap_on_timeout=True)),
 }
 
 
@@ -150,7 +151,7 @@ def merge(base: dict[str, Any], *overrides: dict[str, Any]) -> dict[str, Any]:
 def build_configs() -> dict[str, dict[str, Any]]:
     c: dict[str, dict[str, Any]] = {"faithful": merge(FAITHFUL), "good": merge(GOOD)}
     for name, (fv, gv) in FACTORS.items():
-        c[f"faithful+{name}"] = merge(FAITHFUL, gv) if name != "timeout" else merge(FAITHFUL, gv)
+        c[f"faithful+{name}"] = merge(FAITHFUL, gv) if name != "timeout" else merge(FAITHFUL, fv)  # timeout: -> False
         c[f"good-{name}"] = merge(GOOD, fv)
     # combined steps of the step-size question, and joint factor groups
     c["faithful+lr+beta1"] = merge(FAITHFUL, FACTORS["lr"][1], FACTORS["beta1"][1])
@@ -163,6 +164,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["good+sigma0.2"] = merge(GOOD, dict(sigma=0.2))
     c["good+nets64"] = merge(GOOD, dict(policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]))))  # = good
     c["good+nets256"] = merge(GOOD, dict(policy_kwargs=dict(net_arch=dict(pi=[256, 256], qf=[256, 256]))))
+    c["good+csteps100"] = merge(GOOD, dict(critic_steps=100))
     c["good+csteps25"] = merge(GOOD, dict(critic_steps=25))
     c["good+vecnorm"] = merge(GOOD, dict(_vecnorm=True))
     c["good+bnmom"] = merge(GOOD, dict(policy_kwargs=dict(batch_norm=True, bn_momentum=0.01)))
@@ -173,6 +175,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["proto-per-both"] = merge(GOOD, dict(_proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True, actor_per=True)))
     c["proto-per-actor"] = merge(GOOD, dict(_proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=False, actor_per=True)))
     c["proto-prox1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=1.0)))
+    c["proto-prox0.1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=0.1)))
     c["proto-prox10"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
     c["proto-prox-faithful"] = merge(FAITHFUL, FACTORS["weight"][1], dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
     c["proto-tr"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(trust_region=0.1)))
