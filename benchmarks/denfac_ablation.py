@@ -176,6 +176,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["proto-per-actor"] = merge(GOOD, dict(_proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=False, actor_per=True)))
     c["proto-prox1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=1.0)))
     c["proto-prox0.1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=0.1)))
+    c["proto-proxg1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=1.0, prox_norm="grad")))
+    c["proto-proxg5"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=5.0, prox_norm="grad")))
     c["proto-prox10"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
     c["proto-prox-faithful"] = merge(FAITHFUL, FACTORS["weight"][1], dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
     c["proto-tr"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(trust_region=0.1)))

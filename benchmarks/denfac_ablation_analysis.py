@@ -32,7 +32,11 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             ret, perf = ret[:upto], perf[:upto]
             r["diagnostics"] = [d for d in r["diagnostics"] if d["episode"] <= upto]
         env = r["env"]
-        if env == "acrobot":  # steps to the goal (500 = not reached), lower is better
+        if env == "acrobot":  # steps to the goal (500 = not reached), lower is better; score = -steps
+            # the runner recorded returns (performance_key fallback); the goal gives reward +1 and ends the episode,
+            # a timeout gives the max height (< 0.99), so steps to the goal = length where the return is 1
+            lengths = np.asarray(r["lengths"][: len(ret)], dtype=float)
+            perf = np.where(ret >= 0.999, lengths, 500.0)
             score = -perf
             reached = np.flatnonzero(perf < 500)
         else:
@@ -119,6 +123,7 @@ def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str
                 "corr(Q,MC)": f"{g['q_mc_corr'].median():.2f}" if "q_mc_corr" in g else "–",
                 "std Q/MC": f"{g['q_std/mc_std'].median():.2f}" if "q_std/mc_std" in g else "–",
                 "mean c": f"{g['iw_mean'].median():.2f}" if "iw_mean" in g else "–",
+                "fall-back frac": f"{g.fallback_frac.median():.2f}" if g.fallback_frac.notna().any() else "–",
                 "CPU s/ep": f"{g.cpu_per_ep.median():.2f}",
             }
         )

@@ -16,7 +16,9 @@ Options (constructor keywords on top of DENFAC's):
   end-of-episode update, i.e. before fitted iteration 1). The actor minimises
       L(theta) = - mean_B Q(s, pi(s)) / S + lambda mean_B ||pi(s) - pi_old(s)||^2,
   S = mean_B |Q(s, pi(s))| (detached, as TD3+BC) so lambda is free of the reward scale; the Q part keeps the inverting
-  gradients when ``inverting_gradients`` (dQ/da inverted, then divided by S).
+  gradients when ``inverting_gradients`` (dQ/da inverted, then divided by S). ``prox_norm="grad"`` uses instead
+  S = mean_B ||dQ/da(s, pi(s))||_2 (after inversion), so the Q term has unit action-gradient per sample and the
+  per-update equilibrium action change is about 1/(2 lambda) in the scaled [-1, 1] space, whatever the reward scale.
 - ``trust_region`` = eps > 0 (step-size control across fitted iterations): after the actor steps of each fitted
   iteration, m = sqrt(mean_D ||pi(s) - pi_old(s)||^2 / action_dim) (RMS change of the action per dimension, over the
   whole buffer, in the scaled [-1, 1] space). If m > eps the actor parameters are pulled back on the segment
@@ -60,12 +62,14 @@ class PlainDENFAC(DENFAC):
         self,
         *args: Any,
         prox_coef: float = 0.0,
+        prox_norm: str = "q",
         trust_region: float = 0.0,
         clipped_double_q: bool = False,
         target_norm: bool = False,
         **kwargs: Any,
     ):
         self.prox_coef = prox_coef
+        self.prox_norm = prox_norm
         self.trust_region = trust_region
         self.clipped_double_q = clipped_double_q
         self.target_norm = target_norm
@@ -149,7 +153,10 @@ class PlainDENFAC(DENFAC):
             if self.inverting_gradients:
                 dq = invert_gradients(dq, pi.detach(), th.full_like(pi, -1.0), th.full_like(pi, 1.0))
             if self.prox_coef > 0:
-                scale = q.detach().abs().mean().clamp(min=1e-6)
+                if self.prox_norm == "grad":  # per-sample action-gradient norm: equilibrium step ~ 1/(2 lambda)
+                    scale = (dq.norm(dim=1).mean() * dq.shape[0]).clamp(min=1e-12)
+                else:
+                    scale = q.detach().abs().mean().clamp(min=1e-6)
                 with th.no_grad():
                     pi_old = actor_old(o)
                 loss = -(pi * dq.detach()).sum() / scale + self.prox_coef * (pi - pi_old).pow(2).sum(1).mean()
