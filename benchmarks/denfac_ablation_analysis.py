@@ -1,0 +1,166 @@
+"""Tables of the DENFAC ablation runs (``denfac_ablation.py``): per (config, env) medians and quartiles over seeds.
+
+Writes ``runs.csv`` (one line per run), ``episodes.csv`` (one line per episode), ``diagnostics.csv`` and
+``tables.md`` next to ``runs/``. Usage: ``python benchmarks/denfac_ablation_analysis.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+RESULTS = Path(__file__).resolve().parent / "results" / "denfac_ablation"
+# return threshold per env for "episode of first return above"
+DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot": 30, "invpendulum": 100}
+THRESH = {"pendulum": -200.0, "halfcheetah": 50.0, "cartpole": -500.0, "invpendulum": 999.0, "acrobot": None}
+
+
+def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """Per-run metrics; with ``upto`` every run is cut to its first ``upto`` episodes (shorter runs dropped)."""
+    runs, eps, diags = [], [], []
+    for f in sorted((results / "runs").glob("*/*/seed_*.json")):
+        r = json.loads(f.read_text())
+        ret = np.asarray(r["returns"], dtype=float)
+        perf = np.asarray(r["paper_performance"], dtype=float)
+        if upto is not None:
+            if len(ret) < upto:
+                continue
+            ret, perf = ret[:upto], perf[:upto]
+            r["diagnostics"] = [d for d in r["diagnostics"] if d["episode"] <= upto]
+        env = r["env"]
+        if env == "acrobot":  # steps to the goal (500 = not reached), lower is better; score = -steps
+            # the runner recorded returns (performance_key fallback); the goal gives reward +1 and ends the episode,
+            # a timeout gives the max height (< 0.99), so steps to the goal = length where the return is 1
+            lengths = np.asarray(r["lengths"][: len(ret)], dtype=float)
+            perf = np.where(ret >= 0.999, lengths, 500.0)
+            score = -perf
+            reached = np.flatnonzero(perf < 500)
+        else:
+            score = ret
+            th_ = THRESH.get(env)
+            reached = np.flatnonzero(ret >= th_) if th_ is not None else np.array([])
+        best = np.maximum.accumulate(score)
+        n = len(ret)
+        first = int(reached[0]) + 1 if len(reached) else np.nan
+        # stability: fraction of episodes after the first success falling below half the best (returns shifted by
+        # the env's worst observed episode so that "half" is meaningful for negative returns)
+        stab = np.nan
+        if len(reached):
+            lo = score.min()
+            after = score[reached[0] + 1 :]
+            if len(after):
+                stab = float(np.mean((after - lo) < 0.5 * (best[-1] - lo)))
+        row = dict(
+            config=r["config"] if r["episodes"] == DEFAULT_EPISODES.get(env, r["episodes"]) or upto else f"{r['config']} ({r['episodes']} ep)",
+            env=env,
+            seed=r["seed"],
+            episodes=n,
+            last10=float(score[-10:].mean()),
+            best=float(best[-1]),
+            first_above=first,
+            cpu_s=r["cpu_s"],
+            cpu_per_ep=r["cpu_s_per_episode"],
+            fallback_frac=stab,
+        )
+        for k_ep in (10, 15, 20, 30, 40, 50, 100):
+            if n >= k_ep:
+                row[f"best@{k_ep}"] = float(best[k_ep - 1])
+                row[f"last10@{k_ep}"] = float(score[max(0, k_ep - 10) : k_ep].mean())
+        if r["diagnostics"]:
+            d = r["diagnostics"][-1]
+            for k in ("fit_r2", "q_mc_corr", "q_mc_bias", "q_std", "mc_std", "iw_mean", "td_mse", "target_var"):
+                row[k] = d.get(k, np.nan)
+            row["q_std/mc_std"] = d["q_std"] / d["mc_std"] if d.get("mc_std") else np.nan
+        runs.append(row)
+        for i in range(n):
+            eps.append(dict(config=r["config"], env=env, seed=r["seed"], episode=i + 1, ret=ret[i], perf=perf[i], best=best[i]))
+        for d in r["diagnostics"]:
+            diags.append(dict(config=r["config"], env=env, seed=r["seed"], **d))
+    return pd.DataFrame(runs), pd.DataFrame(eps), pd.DataFrame(diags)
+
+
+def q(x: pd.Series) -> str:
+    x = x.dropna()
+    if len(x) == 0:
+        return "–"
+    return f"{x.median():.0f} [{x.quantile(0.25):.0f}, {x.quantile(0.75):.0f}]"
+
+
+def to_markdown(df: pd.DataFrame) -> str:
+    """Markdown table without the optional ``tabulate`` dependency."""
+    cols = list(df.columns)
+    lines = ["| " + " | ".join(map(str, cols)) + " |", "|" + "---|" * len(cols)]
+    for _, r in df.iterrows():
+        lines.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str:
+    df = runs[runs.env == env]
+    if configs is not None:
+        df = df[df.config.isin(configs)]
+    if df.empty:
+        return "(no runs)\n"
+    rows = []
+    order = configs if configs is not None else sorted(df.config.unique())
+    for c in order:
+        g = df[df.config == c]
+        if g.empty:
+            continue
+        fa = g.first_above
+        rows.append(
+            {
+                "config": c,
+                "seeds": len(g),
+                "last-10 mean": q(g.last10),
+                "best-so-far": q(g.best),
+                "1st ep above thr (median; reached)": f"{fa.median():.0f} ({fa.notna().sum()}/{len(g)})" if fa.notna().any() else f"– (0/{len(g)})",
+                "fit R2": f"{g['fit_r2'].median():.3f}" if "fit_r2" in g else "–",
+                "corr(Q,MC)": f"{g['q_mc_corr'].median():.2f}" if "q_mc_corr" in g else "–",
+                "std Q/MC": f"{g['q_std/mc_std'].median():.2f}" if "q_std/mc_std" in g else "–",
+                "mean c": f"{g['iw_mean'].median():.2f}" if "iw_mean" in g else "–",
+                "fall-back frac": f"{g.fallback_frac.median():.2f}" if g.fallback_frac.notna().any() else "–",
+                "CPU s/ep": f"{g.cpu_per_ep.median():.2f}",
+            }
+        )
+    return to_markdown(pd.DataFrame(rows)) + "\n"
+
+
+def select(runs: pd.DataFrame, prefix: str, base: str) -> list[str]:
+    names = sorted(c for c in runs.config.unique() if c.startswith(prefix))
+    return [base] + [c for c in names if c != base]
+
+
+def main() -> int:
+    results = Path(sys.argv[1]) if len(sys.argv) > 1 else RESULTS
+    runs, eps, diags = load(results)
+    runs.to_csv(results / "runs.csv", index=False)
+    eps.to_csv(results / "episodes.csv", index=False)
+    diags.to_csv(results / "diagnostics.csv", index=False)
+    out = ["# Tables (generated by benchmarks/denfac_ablation_analysis.py)\n"]
+    out.append("## Pendulum-v1, 40 episodes: from the good config back towards faithful (one factor reverted)\n")
+    out.append(table(runs, "pendulum", ["faithful"] + select(runs, "good", "good")))
+    out.append("## Pendulum-v1, 40 episodes: from faithful towards good (one factor changed)\n")
+    out.append(table(runs, "pendulum", select(runs, "faithful", "faithful")))
+    out.append("## HalfCheetahPaper-v0, 30 episodes: faithful, good and good minus one factor\n")
+    out.append(table(runs, "halfcheetah", ["faithful"] + select(runs, "good", "good")))
+    for env in ["cartpole", "invpendulum", "acrobot"]:
+        if (runs.env == env).any():
+            out.append(f"## {env}: generalisation of the good config\n")
+            out.append(table(runs, env))
+    out.append("## Prototypes, Pendulum-v1, 40 episodes (plain-autograd subclasses; 'good' = library fast path)\n")
+    out.append(table(runs, "pendulum", ["good"] + select(runs, "proto", "proto-uniform")))
+    r20, _, _ = load(results, upto=20)
+    out.append("## Prototypes, HalfCheetahPaper-v0, every run cut to its first 20 episodes\n")
+    out.append(table(r20, "halfcheetah", ["good"] + select(r20, "proto", "proto-uniform") + ["good+D3000"]))
+    (results / "tables.md").write_text("\n".join(out))
+    print("\n".join(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
