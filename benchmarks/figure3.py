@@ -207,6 +207,7 @@ def sweep(
     results_dir.mkdir(parents=True, exist_ok=True)
     status: dict[str, list] = {"done": [], "skipped": [], "failed": []}
     tasks = []
+    git = figure3_run.git_state()  # the code this sweep loads; a commit made while it runs does not change it
     for algo, env, seed in cells:
         budget = suites.budget(env, (episodes or {}).get(env))
         if budget.episodes < 1:
@@ -217,6 +218,7 @@ def sweep(
             "zoo_algo": suites.ALGOS[algo].zoo_algo,
             "hyperparams": hyperparams,
             "hyperparams_source": source,
+            "git": git,
             "env": env,
             "seed": int(seed),
             "episodes": budget.episodes,
@@ -230,7 +232,7 @@ def sweep(
     if verbose:
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
     sweep_info = {
-        "git": figure3_run.git_state(),
+        "git": git,
         "machine": figure3_run.machine_info(),
         "load_average": os.getloadavg(),
         "suite": suite,

@@ -161,7 +161,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "hyperparams_source": source,
         "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
         "lower_is_better": facts.lower_is_better,
-        "git": git_state(),
+        "git": task.get("git") or git_state(),
         "machine": machine_info(),
         "load_average": {"start": load_start, "end": os.getloadavg()},
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
