@@ -41,6 +41,8 @@ from typing import Any
 
 import yaml
 
+from sb3_denfac.envs import ENV_IDS
+
 #: This package's algorithms, imported lazily by :func:`algorithm_class` ("zoo name" -> "module:Class").
 ALGORITHMS: dict[str, str] = {
     "denfac": "sb3_denfac.denfac:DENFAC",
@@ -51,15 +53,12 @@ ALGORITHMS: dict[str, str] = {
 }
 
 #: Folder of the YAML hyperparameter files (shipped as package data).
+
 HYPERPARAMS_DIR = Path(importlib.util.find_spec("sb3_denfac.hyperparams").submodule_search_locations[0])
 """The zoo YAML files: ``hyperparams/`` of the repository, installed as the package data of ``sb3_denfac.hyperparams``."""
 
-#: Ids of the environments registered by ``import sb3_denfac``.
-PACKAGE_ENV_IDS = (
-    "sb3_denfac/ContinuousAcrobot-v0",
-    "sb3_denfac/ContinuousCartPole-v0",
-    "sb3_denfac/HalfCheetahPaper-v0",
-)
+#: Ids of the paper's environments registered by ``import sb3_denfac`` (their one list: ``sb3_denfac.envs``).
+PACKAGE_ENV_IDS = ENV_IDS
 
 #: YAML keys that the zoo consumes itself (rl_zoo3.exp_manager) instead of passing them to the algorithm.
 ZOO_KEYS = frozenset(
