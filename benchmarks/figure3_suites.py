@@ -16,7 +16,7 @@ from typing import Any
 from sb3_denfac.envs.facts import env_facts
 
 _HERE = Path(__file__).resolve().parent
-PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "sb3_denfac" / "hyperparams"  # the package's zoo YAML files
+PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
 BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
 SWEEP_PLAN = _HERE / "results" / "sweep_plan.csv"  # estimated CPU seconds per run, written by figure3_cost.py
 

@@ -1,6 +1,6 @@
 """Compute cost of one DENFAC end-of-episode update on replay buffers filled by real training episodes.
 
-For each paper env (Figure 5 settings from ``sb3_denfac/hyperparams/denfac.yml``) and each buffer, it times in one
+For each paper env (Figure 5 settings from ``hyperparams/denfac.yml``) and each buffer, it times in one
 interleaved run, with the same thread count:
 
 - ``fast``: the :class:`~sb3_denfac.denfac.fast.FastUpdater` (``update_path="fast"``, the default);

@@ -12,7 +12,7 @@ and their Optuna samplers to ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` / `
 command is handed to ``rl_zoo3.train.train``, ``rl_zoo3.enjoy.enjoy`` or the ``rl_zoo3.record_video`` script with the
 same command line. Before training, :func:`main` adds what the zoo cannot guess and checks the configuration:
 
-- ``--conf-file`` defaults to this package's ``sb3_denfac/hyperparams/<algo>.yml`` (for td3/sac/crossq only when that
+- ``--conf-file`` defaults to this package's ``hyperparams/<algo>.yml`` (for td3/sac/crossq only when that
   file has an entry for the env; otherwise the zoo's own file is used);
 - with ``-optimize`` and no ``--storage``, the study is kept in ``sqlite:///<log-folder>/optuna.db`` under the study
   name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study;
@@ -41,6 +41,8 @@ from typing import Any
 
 import yaml
 
+from sb3_denfac.envs import ENV_IDS
+
 #: This package's algorithms, imported lazily by :func:`algorithm_class` ("zoo name" -> "module:Class").
 ALGORITHMS: dict[str, str] = {
     "denfac": "sb3_denfac.denfac:DENFAC",
@@ -51,14 +53,12 @@ ALGORITHMS: dict[str, str] = {
 }
 
 #: Folder of the YAML hyperparameter files (shipped as package data).
-HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 
-#: Ids of the environments registered by ``import sb3_denfac``.
-PACKAGE_ENV_IDS = (
-    "sb3_denfac/ContinuousAcrobot-v0",
-    "sb3_denfac/ContinuousCartPole-v0",
-    "sb3_denfac/HalfCheetahPaper-v0",
-)
+HYPERPARAMS_DIR = Path(importlib.util.find_spec("sb3_denfac.hyperparams").submodule_search_locations[0])
+"""The zoo YAML files: ``hyperparams/`` of the repository, installed as the package data of ``sb3_denfac.hyperparams``."""
+
+#: Ids of the paper's environments registered by ``import sb3_denfac`` (their one list: ``sb3_denfac.envs``).
+PACKAGE_ENV_IDS = ENV_IDS
 
 #: YAML keys that the zoo consumes itself (rl_zoo3.exp_manager) instead of passing them to the algorithm.
 ZOO_KEYS = frozenset(
@@ -537,7 +537,7 @@ COMMANDS: dict[str, Callable[[Sequence[str]], None]] = {
 USAGE = """usage: sb3-denfac-zoo {train,optimize,enjoy,record_video} [zoo options]
 
   train         rl_zoo3 train (defaults: --algo denfac --env sb3_denfac/ContinuousCartPole-v0,
-                --conf-file sb3_denfac/hyperparams/<algo>.yml, --num-threads 1); add -optimize to tune
+                --conf-file hyperparams/<algo>.yml, --num-threads 1); add -optimize to tune
                 with Optuna
   optimize      same as train -optimize (default storage sqlite:///<log-folder>/optuna.db, study <algo>-<env>)
   enjoy         rl_zoo3 enjoy (default --num-threads 1)

@@ -324,3 +324,14 @@ def test_cli_reports_config_errors_without_traceback(tmp_path: Path) -> None:
     )
     assert result.returncode != 0
     assert "typo_key" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_hyperparams_live_at_the_repository_root_and_every_package_ships() -> None:
+    """One source for the YAML (hyperparams/, installed as sb3_denfac.hyperparams) and no package left out of the wheel
+    (pyproject lists the packages explicitly because of that mapping)."""
+    tomllib = pytest.importorskip("tomllib")
+    assert zoo.HYPERPARAMS_DIR.resolve() == (REPO / "hyperparams").resolve()
+    assert not (REPO / "sb3_denfac" / "hyperparams").exists()
+    listed = set(tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(REPO).parts) for p in (REPO / "sb3_denfac").rglob("__init__.py")}
+    assert found | {"sb3_denfac.hyperparams"} == listed
