@@ -119,7 +119,10 @@ FACTORS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     "init": (dict(policy_kwargs=dict(init="paper")), dict(policy_kwargs=dict(init="default"))),
     "csteps": (dict(critic_steps=10), dict(critic_steps=50)),
     "batch": (dict(batch_size=None), dict(batch_size=256)),
-    "nets": (dict(policy_kwargs=dict(net_arch=dict(pi=[20], qf=[50, 7]))), dict(policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64])))),
+    "nets": (
+        dict(policy_kwargs=dict(net_arch=dict(pi=[20], qf=[50, 7]))),
+        dict(policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]))),
+    ),
     "sigma": (dict(sigma=0.05), dict(sigma=0.1)),
     "reset": (dict(reset_actor=True), dict(reset_actor=False)),
     "D": (dict(buffer_size=6000), dict(buffer_size=100_000)),
@@ -156,7 +159,9 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # combined steps of the step-size question, and joint factor groups
     c["faithful+lr+beta1"] = merge(FAITHFUL, FACTORS["lr"][1], FACTORS["beta1"][1])
     c["faithful+critfit"] = merge(FAITHFUL, FACTORS["init"][1], FACTORS["csteps"][1])
-    c["faithful+opt+critfit"] = merge(FAITHFUL, FACTORS["lr"][1], FACTORS["beta1"][1], FACTORS["init"][1], FACTORS["csteps"][1])
+    c["faithful+opt+critfit"] = merge(
+        FAITHFUL, FACTORS["lr"][1], FACTORS["beta1"][1], FACTORS["init"][1], FACTORS["csteps"][1]
+    )
     c["faithful+opt+critfit+reset"] = merge(c["faithful+opt+critfit"], FACTORS["reset"][1])
     c["faithful+opt+critfit+reset+weight"] = merge(c["faithful+opt+critfit+reset"], FACTORS["weight"][1])
     c["good-lr+beta1"] = merge(GOOD, FACTORS["lr"][0], FACTORS["beta1"][0])
@@ -179,13 +184,18 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["proto-proxg1"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=1.0, prox_norm="grad")))
     c["proto-proxg5"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=5.0, prox_norm="grad")))
     c["proto-prox10"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
-    c["proto-prox-faithful"] = merge(FAITHFUL, FACTORS["weight"][1], dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0)))
+    c["proto-prox-faithful"] = merge(
+        FAITHFUL, FACTORS["weight"][1], dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=10.0))
+    )
     c["proto-tr"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(trust_region=0.1)))
     c["proto-cdq"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(clipped_double_q=True)))
     c["proto-tnorm"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(target_norm=True)))
     c["good+D3000"] = merge(GOOD, dict(buffer_size=3000))
     c["proto-retain-D3000"] = merge(
-        GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=False, actor_per=False, retention="td"))
+        GOOD,
+        dict(
+            buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=False, actor_per=False, retention="td")
+        ),
     )
     c["proto-per-critic-D3000"] = merge(
         GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True, actor_per=False))

@@ -55,7 +55,9 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             if len(after):
                 stab = float(np.mean((after - lo) < 0.5 * (best[-1] - lo)))
         row = dict(
-            config=r["config"] if r["episodes"] == DEFAULT_EPISODES.get(env, r["episodes"]) or upto else f"{r['config']} ({r['episodes']} ep)",
+            config=r["config"]
+            if r["episodes"] == DEFAULT_EPISODES.get(env, r["episodes"]) or upto
+            else f"{r['config']} ({r['episodes']} ep)",
             env=env,
             seed=r["seed"],
             episodes=n,
@@ -77,7 +79,9 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             row["q_std/mc_std"] = d["q_std"] / d["mc_std"] if d.get("mc_std") else np.nan
         runs.append(row)
         for i in range(n):
-            eps.append(dict(config=r["config"], env=env, seed=r["seed"], episode=i + 1, ret=ret[i], perf=perf[i], best=best[i]))
+            eps.append(
+                dict(config=r["config"], env=env, seed=r["seed"], episode=i + 1, ret=ret[i], perf=perf[i], best=best[i])
+            )
         for d in r["diagnostics"]:
             diags.append(dict(config=r["config"], env=env, seed=r["seed"], **d))
     return pd.DataFrame(runs), pd.DataFrame(eps), pd.DataFrame(diags)
@@ -118,7 +122,9 @@ def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str
                 "seeds": len(g),
                 "last-10 mean": q(g.last10),
                 "best-so-far": q(g.best),
-                "1st ep above thr (median; reached)": f"{fa.median():.0f} ({fa.notna().sum()}/{len(g)})" if fa.notna().any() else f"– (0/{len(g)})",
+                "1st ep above thr (median; reached)": f"{fa.median():.0f} ({fa.notna().sum()}/{len(g)})"
+                if fa.notna().any()
+                else f"– (0/{len(g)})",
                 "fit R2": f"{g['fit_r2'].median():.3f}" if "fit_r2" in g else "–",
                 "corr(Q,MC)": f"{g['q_mc_corr'].median():.2f}" if "q_mc_corr" in g else "–",
                 "std Q/MC": f"{g['q_std/mc_std'].median():.2f}" if "q_std/mc_std" in g else "–",

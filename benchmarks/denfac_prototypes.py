@@ -84,7 +84,10 @@ class PlainDENFAC(DENFAC):
                 if hasattr(m, "reset_parameters") and m is not self.critic2:
                     m.reset_parameters()
             self.critic2.optimizer = th.optim.Adam(
-                self.critic2.parameters(), lr=self.critic.optimizer.param_groups[0]["lr"], betas=self.adam_betas, eps=self.adam_eps
+                self.critic2.parameters(),
+                lr=self.critic.optimizer.param_groups[0]["lr"],
+                betas=self.adam_betas,
+                eps=self.adam_eps,
             )
         self.pop_mu, self.pop_sigma = 0.0, 1.0
 
@@ -177,13 +180,13 @@ class PlainDENFAC(DENFAC):
             ref = actor_old(obs)
             beta = 1.0
             for _ in range(9):
-                for p, po, pn in zip(actor.parameters(), params_old, params_new):
+                for p, po, pn in zip(actor.parameters(), params_old, params_new, strict=True):
                     p.copy_(po + beta * (pn - po))
                 m = float(((actor(obs) - ref).pow(2).mean()).sqrt())
                 if m <= self.trust_region:
                     return beta
                 beta *= 0.5
-            for p, po in zip(actor.parameters(), params_old):
+            for p, po in zip(actor.parameters(), params_old, strict=True):
                 p.copy_(po)
         return 0.0
 
