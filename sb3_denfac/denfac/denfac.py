@@ -132,12 +132,12 @@ class DENFAC(
         "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
         ``benchmarks/results/update_cost.md``). Models saved with the removed "compiled" path load with "fast".
         The two options below are autograd only: "auto" then picks "plain" and "fast" refuses them
-    :param prioritized: mini-batches of D drawn by TD error (paper section 5; Schaul et al.; :mod:`~.options`): "none"
+    :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; needs an int ``batch_size``
     :param priority_alpha: alpha in the priorities p_i = (|delta_i| + eps)^alpha, P(i) = p_i / sum p (0: uniform)
     :param priority_beta: beta in the weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0: no correction)
     :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
-    :param actor_proximal: lambda of the proximal actor (paper section 5, slower policy change; :mod:`~.options`): the
+    :param actor_proximal: lambda of the proximal actor (paper: future work, slower policy change; :mod:`~.options`): the
         normalised ascent of eq. (5) plus lambda mean ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer

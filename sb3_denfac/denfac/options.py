@@ -1,4 +1,4 @@
-"""The two fixes of the paper's section 5 ("future work") as DENFAC options, both off by default.
+"""The two fixes the paper names as future work as DENFAC options, both off by default.
 
 The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
 as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
@@ -13,7 +13,8 @@ stale)::
     delta_i = q_i - Q_{k-1}(s_i, a_i),   p_i = (|delta_i| + eps)^alpha,   P(i) = p_i / sum_j p_j
     w_i = (N P(i))^-beta / max_j (N P(j))^-beta                         (importance correction, in (0, 1])
 
-Each step's mini-batch of ``batch_size`` is drawn from P with replacement; the critic minimises
+Each step's mini-batch of ``batch_size`` is drawn from P with replacement (also while D holds fewer transitions;
+a full batch is refused: it has nothing to draw); the critic minimises
 1/B sum_B w_i c_i (Q(s_i, a_i) - q_i)^2. ``"critic"`` prioritises the critic's mini-batches only (the actor keeps
 uniform ones); ``"both"`` also draws the actor's from the same P and ascends 1/B sum_B w_i Q(s_i, pi(s_i)).
 
