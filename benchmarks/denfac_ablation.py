@@ -200,6 +200,10 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["proto-per-critic-D3000"] = merge(
         GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True, actor_per=False))
     )
+    # the library options (sb3_denfac/denfac/options.py) on the library default (= GOOD), autograd updater
+    c["default"] = merge(GOOD)
+    c["default+per-critic"] = merge(GOOD, dict(prioritized="critic"))
+    c["default+proximal"] = merge(GOOD, dict(actor_proximal=1.0))
     return c
 
 

@@ -287,6 +287,12 @@ INVALID = {
         (dict(learning_rate=-1e-3), "learning_rate"),
         (dict(actor_learning_rate=0.0), "actor_learning_rate"),
         (dict(gamma=1.5), "gamma"),
+        (dict(prioritized="td"), "prioritized"),
+        (dict(prioritized="critic", batch_size=None), "prioritized"),
+        (dict(priority_alpha=-1.0), "priority_alpha"),
+        (dict(priority_beta=2.0), "priority_beta"),
+        (dict(priority_eps=0.0), "priority_eps"),
+        (dict(actor_proximal=-0.1), "actor_proximal"),
     ],
     "ddpg": [
         (dict(tau=0.0), "tau"),

@@ -13,7 +13,23 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.vec_env import VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+
+def check_holds_one_episode(env: VecEnv | None, buffer_size: int) -> None:
+    """A buffer shorter than one episode would never hold a whole episode: refuse it when the length is known."""
+    if env is None:
+        return
+    try:
+        spec = env.get_attr("spec")[0]
+    except (AttributeError, IndexError):
+        spec = None
+    max_steps = getattr(spec, "max_episode_steps", None)
+    if max_steps is not None and buffer_size < max_steps:
+        raise ValueError(
+            f"buffer_size (D={buffer_size}) is smaller than the environment's episode length "
+            f"(spec.max_episode_steps={max_steps}): the FIFO buffer must hold at least one whole episode"
+        )
 
 
 class DENFACReplayBufferSamples(NamedTuple):

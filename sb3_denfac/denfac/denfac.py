@@ -28,8 +28,9 @@ from sb3_denfac.common.checks import (
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
-from sb3_denfac.denfac.buffers import DENFACReplayBuffer
+from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.fast import FastUpdater, supported_networks
+from sb3_denfac.denfac.options import check_options, fast_refusal
 from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.presets import DEFAULT_POLICY_KWARGS
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
@@ -130,6 +131,14 @@ class DENFAC(
         default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or
         "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
         ``benchmarks/results/update_cost.md``). Models saved with the removed "compiled" path load with "fast".
+        The two options below are autograd only: "auto" then picks "plain" and "fast" refuses them
+    :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
+        (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; needs an int ``batch_size``
+    :param priority_alpha: alpha in the priorities p_i = (|delta_i| + eps)^alpha, P(i) = p_i / sum p (0: uniform)
+    :param priority_beta: beta in the weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0: no correction)
+    :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
+    :param actor_proximal: lambda of the proximal actor (paper: future work, slower policy change; :mod:`~.options`): the
+        normalised ascent of eq. (5) plus lambda mean ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -172,6 +181,11 @@ class DENFAC(
         max_grad_norm: float | None = 10.0,
         bootstrap_on_timeout: bool = True,
         update_path: str = "auto",
+        prioritized: str = "none",
+        priority_alpha: float = 0.6,
+        priority_beta: float = 0.4,
+        priority_eps: float = 1e-3,
+        actor_proximal: float = 0.0,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -195,6 +209,9 @@ class DENFAC(
                 "update_path='compiled' was removed in sb3-denfac 0.2 (measured no faster than 'fast' on CPU): use 'fast'"
             )
         check_choice("update_path", update_path, UPDATE_PATHS)
+        self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
+            prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size, update_path
+        )
         super().__init__(
             policy,
             env,
@@ -239,28 +256,13 @@ class DENFAC(
         self.max_grad_norm = max_grad_norm
         self.bootstrap_on_timeout = bootstrap_on_timeout
         self.update_path = update_path
-        self._check_episode_length()
+        check_holds_one_episode(self.env, self.buffer_size)
         # Written into policy_kwargs, so a saved model keeps them if the defaults change; ``load`` replaces
         # policy_kwargs with the saved ones (models of 0.1 saved none: DENFACPolicy's own, the paper's, apply).
         for key, value in DEFAULT_POLICY_KWARGS.items():
             self.policy_kwargs.setdefault(key, copy.deepcopy(value))
         if _init_setup_model:
             self._setup_model()
-
-    def _check_episode_length(self) -> None:
-        """A buffer shorter than one episode would never hold a whole episode: refuse it when the length is known."""
-        if self.env is None:
-            return
-        try:
-            spec = self.env.get_attr("spec")[0]
-        except (AttributeError, IndexError):
-            spec = None
-        max_steps = getattr(spec, "max_episode_steps", None)
-        if max_steps is not None and self.buffer_size < max_steps:
-            raise ValueError(
-                f"buffer_size (D={self.buffer_size}) is smaller than the environment's episode length "
-                f"(spec.max_episode_steps={max_steps}): the FIFO buffer must hold at least one whole episode"
-            )
 
     def _setup_model(self) -> None:
         if self.update_path == "compiled":  # a model saved by sb3-denfac 0.1
@@ -313,15 +315,11 @@ class DENFAC(
 
     def _make_updater(self) -> Updater:
         """The updater that carries out this update (``update_path``; see :mod:`~sb3_denfac.denfac.updaters`)."""
-        settings = FitSettings(
-            critic_steps=self.critic_steps,
-            actor_steps=self.actor_steps,
-            max_grad_norm=self.max_grad_norm,
-            inverting_gradients=self.inverting_gradients,
-            batch_size=self.batch_size,
-            fresh_bn_statistics=self.policy.bn_momentum is None,
-        )
-        if self.update_path == "plain":
+        settings = FitSettings.of(self)
+        unsupported = settings.autograd_only()  # options on that only the autograd updater implements
+        if self.update_path == "fast" and unsupported:
+            raise ValueError(fast_refusal(unsupported))
+        if self.update_path == "plain" or unsupported:
             return AutogradUpdater(self.policy, settings)
         layers = supported_networks(self.policy)
         if layers is None:
@@ -345,6 +343,7 @@ class DENFAC(
                 next_actions = updater.actor(next_obs).clamp(-1.0, 1.0)
                 q_targets = rewards + self.gamma * (1.0 - terminal) * updater.critic(next_obs, next_actions)
                 weights = self._importance_weights(updater, obs, next_obs, actions, log_prob_b)
+                updater.set_priorities(obs, actions, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
                 updater.reset_critic()
             critic_loss = updater.fit_critic(obs, actions, q_targets, weights)

@@ -4,26 +4,33 @@
 
 - ``actor(s)`` and ``critic(s, a)``: pi_{k-1} and Q_{k-1} in eval mode (running statistics), for the targets q_k and
   the importance weights c of eq. (4);
+- ``set_priorities(s, a, q)``: with ``prioritized`` on, the TD errors q_k - Q_{k-1}(s, a) of the buffer, before any
+  reset, set the sampling priorities of the iteration's mini-batches (:mod:`~sb3_denfac.denfac.options`);
 - ``reset_critic()`` and ``reset_actor()``: a random re-initialisation, with a fresh Adam state;
 - ``fit_critic(s, a, q, c)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4);
-- ``fit_actor(s)``: G Adam steps ascending 1/N sum Q(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked;
+- ``fit_actor(s)``: G Adam steps ascending 1/N sum Q(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked (with
+  ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
 - ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
-(hand-written steps on flat parameters).
+(hand-written steps on flat parameters). The options of :mod:`~sb3_denfac.denfac.options` (prioritised sampling,
+proximal actor) exist in the autograd updater only.
 """
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any
 
 import torch as th
 from torch import nn
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
+from sb3_denfac.denfac.options import PrioritisedSampler, autograd_only, proximal_actor_backward
 
 
 @dataclass(frozen=True)
@@ -36,6 +43,32 @@ class FitSettings:
     inverting_gradients: bool  # bound the unbounded actor with inverting gradients
     batch_size: int | None  # None: the whole buffer at every step; else one uniform mini-batch per step
     fresh_bn_statistics: bool  # reset the running statistics at the start of every fit (``bn_momentum=None``)
+    prioritized: str = "none"  # "none" (uniform), "critic" or "both": mini-batches drawn by TD error (options.py)
+    priority_alpha: float = 0.6  # p_i = (|delta_i| + eps)^alpha
+    priority_beta: float = 0.4  # w_i = (N P(i))^-beta / max_j (N P(j))^-beta
+    priority_eps: float = 1e-3
+    actor_proximal: float = 0.0  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
+
+    @staticmethod
+    def of(model: Any) -> FitSettings:
+        """The settings of a :class:`~sb3_denfac.denfac.denfac.DENFAC` (its constructor arguments)."""
+        return FitSettings(
+            critic_steps=model.critic_steps,
+            actor_steps=model.actor_steps,
+            max_grad_norm=model.max_grad_norm,
+            inverting_gradients=model.inverting_gradients,
+            batch_size=model.batch_size,
+            fresh_bn_statistics=model.policy.bn_momentum is None,
+            prioritized=model.prioritized,
+            priority_alpha=model.priority_alpha,
+            priority_beta=model.priority_beta,
+            priority_eps=model.priority_eps,
+            actor_proximal=model.actor_proximal,
+        )
+
+    def autograd_only(self) -> list[str]:
+        """The options that are on and that only :class:`AutogradUpdater` implements (:mod:`~.options`)."""
+        return autograd_only(self.prioritized, self.actor_proximal)
 
 
 class Updater(ABC):
@@ -59,6 +92,10 @@ class Updater(ABC):
         """Samples per step out of ``n``: the whole buffer, or the mini-batch that :meth:`batch_indices` draws."""
         size = self.settings.batch_size
         return n if size is None or size >= n else size
+
+    def set_priorities(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor) -> None:  # noqa: B027
+        """The TD errors q - Q_{k-1}(s, a) of this fitted iteration set its sampling priorities (``prioritized``);
+        called before any reset. Uniform sampling (the default) needs nothing."""
 
     def reset_critic(self) -> None:
         self.policy.reset_critic()
@@ -99,8 +136,20 @@ class AutogradUpdater(Updater):
     """Autograd on the policy's modules, ``clip_grad_norm_`` and the modules' own ``torch.optim`` optimizers.
 
     Works with any policy (features extractors, optimizer classes); the reference the fast updater is tested and
-    benchmarked against.
+    benchmarked against. Implements the options of :mod:`~sb3_denfac.denfac.options`: prioritised mini-batches
+    (``prioritized``, after :meth:`set_priorities`) and the proximal actor (``actor_proximal``, towards a frozen copy
+    of the actor made here, i.e. at the start of the update).
     """
+
+    def __init__(self, policy: nn.Module, settings: FitSettings):
+        super().__init__(policy, settings)
+        self.sampler: PrioritisedSampler | None = None
+        self.old_actor: nn.Module | None = None
+        if settings.actor_proximal > 0:  # pi_old: frozen, eval mode (running statistics of the start of the update)
+            self.old_actor = copy.deepcopy(policy.actor)
+            self.old_actor.optimizer = None
+            self.old_actor.set_training_mode(False)
+            self.old_actor.requires_grad_(False)
 
     def actor(self, obs: th.Tensor) -> th.Tensor:
         self.policy.actor.set_training_mode(False)
@@ -110,17 +159,35 @@ class AutogradUpdater(Updater):
         self.policy.critic.set_training_mode(False)
         return self.policy.critic(obs, actions)
 
+    def set_priorities(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor) -> None:
+        settings = self.settings
+        if settings.prioritized == "none":
+            return
+        assert settings.batch_size is not None  # checked by DENFAC: prioritised sampling draws mini-batches
+        with th.no_grad():
+            td_errors = q_targets - self.critic(obs, actions)
+        self.sampler = PrioritisedSampler(
+            td_errors, settings.priority_alpha, settings.priority_beta, settings.priority_eps, settings.batch_size
+        )
+
+    def draw(self, n: int, prioritised: bool) -> tuple[th.Tensor | None, th.Tensor | None]:
+        """One step's mini-batch indices (None: full batch) and weights w (None: uniform sampling)."""
+        if prioritised and self.sampler is not None:
+            return self.sampler.batch()
+        return self.batch_indices(n), None
+
     def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
         critic, settings = self.policy.critic, self.settings
         self.fresh_bn_statistics(critic)
         critic.set_training_mode(True)
         loss = th.zeros(())
         for _ in range(settings.critic_steps):
-            idx = self.batch_indices(obs.shape[0])
+            idx, w = self.draw(obs.shape[0], settings.prioritized != "none")
             o, a, q, c = (
                 (obs, actions, q_targets, weights) if idx is None else (obs[idx], actions[idx], q_targets[idx], weights[idx])
             )
-            loss = (c * (critic(o, a) - q).pow(2)).mean()
+            errors = c * (critic(o, a) - q).pow(2)
+            loss = (errors if w is None else w * errors).mean()
             critic.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if settings.max_grad_norm is not None:
@@ -140,12 +207,16 @@ class AutogradUpdater(Updater):
         critic.requires_grad_(False)
         low, high = th.full((1,), -1.0, device=obs.device), th.full((1,), 1.0, device=obs.device)
         for _ in range(settings.actor_steps):
-            idx = self.batch_indices(obs.shape[0])
+            idx, w = self.draw(obs.shape[0], settings.prioritized == "both")
             o = obs if idx is None else obs[idx]
             actor.optimizer.zero_grad(set_to_none=True)
             pi = actor(o)
-            q = critic(o, pi)
-            if settings.inverting_gradients:
+            q = critic(o, pi) if w is None else w * critic(o, pi)
+            if self.old_actor is not None:
+                with th.no_grad():
+                    old_pi = self.old_actor(o)
+                objective = proximal_actor_backward(q, pi, old_pi, settings.actor_proximal, settings.inverting_gradients)
+            elif settings.inverting_gradients:
                 objective = inverting_gradient_actor_backward(q, pi, low, high)
             else:
                 (-q.mean()).backward()

@@ -1,0 +1,106 @@
+"""The two fixes the paper names as future work as DENFAC options, both off by default.
+
+The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
+as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
+critic should sample D the same way) and a slower change of the policy. Both are implemented by the autograd updater
+(:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`); the fast updater does not support them.
+
+**Prioritised sampling of D** (``prioritized``; Schaul et al. 2016, "Prioritized Experience Replay", proportional
+variant). At every fitted iteration k, with the targets q_k of eq. (4), the TD errors of the whole buffer are
+recomputed with the eval-mode critic before it is fitted (DENFAC recomputes every target anyway, so no priority is
+stale)::
+
+    delta_i = q_i - Q_{k-1}(s_i, a_i),   p_i = (|delta_i| + eps)^alpha,   P(i) = p_i / sum_j p_j
+    w_i = (N P(i))^-beta / max_j (N P(j))^-beta                         (importance correction, in (0, 1])
+
+Each step's mini-batch of ``batch_size`` is drawn from P with replacement (also while D holds fewer transitions;
+a full batch is refused: it has nothing to draw); the critic minimises
+1/B sum_B w_i c_i (Q(s_i, a_i) - q_i)^2. ``"critic"`` prioritises the critic's mini-batches only (the actor keeps
+uniform ones); ``"both"`` also draws the actor's from the same P and ascends 1/B sum_B w_i Q(s_i, pi(s_i)).
+
+**Proximal actor** (``actor_proximal`` = lambda > 0). pi_old is the actor at the start of the end-of-episode update
+(before fitted iteration 1 and any reset). Each actor step minimises, on its mini-batch B,
+
+    L = - 1/B sum_B ghat_i . pi(s_i) + lambda 1/B sum_B ||pi(s_i) - pi_old(s_i)||^2,
+    ghat_i = g_i / S,   S = 1/B sum_B ||g_i||_2   (detached),
+
+with g_i = dQ/da at (s_i, pi(s_i)) of eq. (5), after inverting gradients if ``inverting_gradients`` (and times w_i
+with ``prioritized="both"``). The Q term has unit action gradient per sample on average, so the action change at which
+the two terms balance is about 1/(2 lambda) in the scaled action space [-1, 1], whatever the scale of the rewards.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch as th
+
+from sb3_denfac.common.checks import check_choice, check_number
+from sb3_denfac.common.inverting_gradients import invert_gradients
+
+PRIORITIZED = ("none", "critic", "both")
+
+
+def check_options(
+    prioritized: Any, alpha: Any, beta: Any, eps: Any, proximal: Any, batch_size: int | None, update_path: str
+) -> tuple[str, float, float, float, float]:
+    """The validated options (``prioritized``, ``priority_alpha``, ``priority_beta``, ``priority_eps``,
+    ``actor_proximal``), or a ValueError naming the argument."""
+    check_choice("prioritized", prioritized, PRIORITIZED)
+    alpha = check_number("priority_alpha", alpha, minimum=0.0, note=" (0: uniform)")
+    beta = check_number("priority_beta", beta, minimum=0.0, maximum=1.0)
+    eps = check_number("priority_eps", eps, minimum=0.0, exclusive_minimum=True)
+    proximal = check_number("actor_proximal", proximal, minimum=0.0, note=" (0: off)")
+    if prioritized != "none" and batch_size is None:
+        raise ValueError(
+            f"prioritized={prioritized!r} draws mini-batches from the priorities and needs an int batch_size, "
+            "got batch_size=None (full batch)"
+        )
+    unsupported = autograd_only(prioritized, proximal)
+    if update_path == "fast" and unsupported:
+        raise ValueError(fast_refusal(unsupported))
+    return prioritized, alpha, beta, eps, proximal
+
+
+def autograd_only(prioritized: str, proximal: float) -> list[str]:
+    """The options that are on and that only the autograd updater implements."""
+    return [f"prioritized={prioritized!r}"] * (prioritized != "none") + [f"actor_proximal={proximal:g}"] * (proximal > 0)
+
+
+def fast_refusal(unsupported: list[str]) -> str:
+    return f"update_path='fast' does not support {' and '.join(unsupported)}: use update_path='auto' or 'plain'"
+
+
+class PrioritisedSampler:
+    """Mini-batches drawn with replacement from P(i) = p_i / sum p, p_i = (|delta_i| + eps)^alpha, with their
+    importance weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (module docstring)."""
+
+    def __init__(self, td_errors: th.Tensor, alpha: float, beta: float, eps: float, batch_size: int):
+        priorities = (td_errors.detach().abs().flatten() + eps).pow(alpha)
+        self.probabilities = priorities / priorities.sum()
+        # max_j (N P(j))^-beta is at the least likely transition: w_i = (P(i) / min_j P(j))^-beta
+        self.weights = (self.probabilities / self.probabilities.min()).pow(-beta).unsqueeze(1)
+        self.batch_size = batch_size
+
+    def batch(self) -> tuple[th.Tensor, th.Tensor]:
+        """Indices of one mini-batch and their weights, shape (B,) and (B, 1)."""
+        idx = th.multinomial(self.probabilities, self.batch_size, replacement=True)
+        return idx, self.weights[idx]
+
+
+def proximal_actor_backward(
+    q_values: th.Tensor, actions: th.Tensor, old_actions: th.Tensor, coef: float, inverting_gradients: bool
+) -> th.Tensor:
+    """Back-propagate the proximal actor loss L (module docstring) into the actor parameters.
+
+    ``actions`` = pi(s) (part of the graph), ``q_values`` = (w *) Q(s, actions) with the critic frozen,
+    ``old_actions`` = pi_old(s). Returns the mean of ``q_values`` (detached), for logging.
+    """
+    (grad,) = th.autograd.grad(q_values.mean(), actions)
+    grad = grad * actions.shape[0]  # g_i = dQ/da per sample (the mean's 1/B undone)
+    if inverting_gradients:
+        grad = invert_gradients(grad, actions.detach(), th.full_like(grad, -1.0), th.full_like(grad, 1.0))
+    scale = grad.norm(dim=1).mean().clamp(min=1e-12)
+    loss = -(actions * (grad / scale)).sum(1).mean() + coef * (actions - old_actions).pow(2).sum(1).mean()
+    loss.backward()
+    return q_values.detach().mean()
