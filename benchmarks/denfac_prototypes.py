@@ -117,6 +117,14 @@ class PlainDENFAC(DENFAC):
         w = w / ((n * probs.min()) ** (-self.per_beta))  # max_j w_j is at the least likely transition
         return th.from_numpy(idx), th.as_tensor(w, dtype=th.float32).unsqueeze(1)
 
+    def _reset_bn_statistics(self, net) -> None:
+        """With ``bn_momentum=None`` the running statistics are those of this fit only (the library's updaters do the
+        same in ``Updater.fresh_bn_statistics``)."""
+        if self.policy.bn_momentum is None:
+            for layer in net.modules():
+                if isinstance(layer, th.nn.modules.batchnorm._BatchNorm):
+                    layer.reset_running_stats()
+
     def _fit_critic_plain(self, critic, obs, actions, y, c, probs):
         opt = critic.optimizer
         critic.set_training_mode(True)
