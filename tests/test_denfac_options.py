@@ -17,6 +17,7 @@ from sb3_denfac.denfac.updaters import AutogradUpdater
 
 SMALL = dict(gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
 OPTIONS = [dict(prioritized="critic"), dict(prioritized="both"), dict(actor_proximal=1.0)]
+AUTOGRAD_ONLY = OPTIONS[:2]  # the fast updater implements the proximal actor too
 
 
 def small_model(**kwargs) -> DENFAC:
@@ -140,18 +141,25 @@ def test_huge_proximal_coefficient_keeps_the_actor():
     free = actor_change(actor_proximal=0.0, update_path="plain", actor_steps=25, actor_learning_rate=0.01)
     held = actor_change(actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01)
     assert free > 0.05 and held < 0.1 * free, (free, held)
+    held_fast = actor_change(actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01, update_path="fast")
+    assert held_fast < 0.1 * free, (free, held_fast)
     # the old actor is a frozen copy made when the updater is made: the policy's actor is not it
-    model = small_model(actor_proximal=1.0)
+    model = small_model(actor_proximal=1.0, update_path="plain")
     updater = model._make_updater()
     assert updater.old_actor is not model.actor and not any(p.requires_grad for p in updater.old_actor.parameters())
+    fast = small_model(actor_proximal=1.0, update_path="fast")._make_updater()  # the fast one: frozen folded affines
+    obs = th.zeros((3, 2))
+    old_fast = fast.actor_net.eval_forward(obs.t(), fast.old_actor_affines).t()
     with th.no_grad():
         model.actor.mu[-1].bias.add_(1.0)  # moving the actor does not move pi_old
-    obs = th.zeros((3, 2))
+        fast.policy.actor.mu[-1].bias.add_(1.0)
     assert (updater.old_actor(obs) - model.actor(obs)).abs().max() > 0.9
+    th.testing.assert_close(fast.actor_net.eval_forward(obs.t(), fast.old_actor_affines).t(), old_fast)
+    assert (fast.actor(obs) - old_fast).abs().max() > 0.9
 
 
 # ----- updater choice, validation, save/load ---------------------------------------------------------------------------
-@pytest.mark.parametrize("option", OPTIONS, ids=lambda o: next(iter(o.items()))[0] + "=" + str(next(iter(o.values()))))
+@pytest.mark.parametrize("option", AUTOGRAD_ONLY, ids=lambda o: "prioritized=" + o["prioritized"])
 def test_auto_picks_autograd_and_fast_refuses(option):
     assert isinstance(small_model(batch_size=16)._make_updater(), FastUpdater)  # default: fast
     assert isinstance(small_model(batch_size=16, **option)._make_updater(), AutogradUpdater)
@@ -162,6 +170,11 @@ def test_auto_picks_autograd_and_fast_refuses(option):
     model.update_path = "fast"  # set after construction: refused when the update is made
     with pytest.raises(ValueError, match=name):
         model._make_updater()
+
+
+def test_auto_picks_fast_for_the_proximal_actor():
+    assert isinstance(small_model(batch_size=16, actor_proximal=1.0)._make_updater(), FastUpdater)
+    assert isinstance(small_model(actor_proximal=1.0, update_path="plain")._make_updater(), AutogradUpdater)
 
 
 def test_invalid_options():

@@ -48,6 +48,15 @@ class MultiActionEnv(gym.Env):
         dict(env="multi_action", policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]), init="default")),
         dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), bn_momentum=0.1)),  # running averages kept
         dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), batch_norm=False)),
+        # the proximal actor (options.py): full batch with BN and inverting gradients, mini-batches without BN
+        dict(actor_proximal=1.0),
+        dict(
+            actor_proximal=0.5,
+            inverting_gradients=False,
+            batch_size=32,
+            reset_actor=False,
+            policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]), batch_norm=False, init="default"),
+        ),
     ],
 )
 def test_fast_and_plain_paths_agree(make_denfac, kwargs):

@@ -291,11 +291,22 @@ class EvalCritic:
 
 
 def actor_step(
-    net, ws: Workspace, obs, fixed: FixedStats | None, critic: EvalCritic, max_grad_norm, inverting: bool, want_objective: bool
+    net,
+    ws: Workspace,
+    obs,
+    fixed: FixedStats | None,
+    critic: EvalCritic,
+    max_grad_norm,
+    inverting: bool,
+    want_objective: bool,
+    proximal: tuple[float, th.Tensor] | None = None,
 ):
     """One Adam step ascending 1/N sum_n Q(s_n, pi(s_n)) (Algorithm 1, actor fit; inverting gradients optional).
 
-    Returns the objective before the step if ``want_objective``, else None.
+    ``proximal`` = (lambda, pi_old(s) feature-major): the step descends the proximal loss of
+    :mod:`~sb3_denfac.denfac.options` instead, dL/dpi_n = -a_n / sum_m ||a_m|| + 2 lambda (pi_n - pi_old_n) / N with
+    a_n = the (inverted) ascent direction d(1/N sum Q)/dpi_n = g_n / N, so a_n / sum ||a|| = g_n / (N S).
+    Returns the objective (mean Q, without the penalty) before the step if ``want_objective``, else None.
     """
     factors = net.advance()
     folds = forward_train(net, ws, obs, fixed)
@@ -306,6 +317,12 @@ def actor_step(
     ascent, objective = critic.action_gradient(pi, want_objective)
     if inverting:
         ascent = invert_gradients_unit_box(ascent, pi, out=critic.inverted)
-    backward(net, ws, obs, folds, ascent.neg_())
+    if proximal is None:
+        grad_pi = ascent.neg_()
+    else:
+        coef, old_pi = proximal
+        scale = th.linalg.vector_norm(ascent, dim=0).sum().clamp_(min=1e-12)
+        grad_pi = th.sub(pi, old_pi).mul_(2.0 * coef / pi.shape[1]).sub_(ascent.div_(scale))
+    backward(net, ws, obs, folds, grad_pi)
     adam_step(net, max_grad_norm)
     return objective

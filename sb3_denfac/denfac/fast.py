@@ -166,10 +166,11 @@ class _FlatNet:
                 out.append((weight * scale, bias + weight @ (beta - layer.bn.running_mean * scale)))  # type: ignore[operator]
         return out
 
-    def eval_forward(self, x: th.Tensor) -> th.Tensor:
-        """Eval-mode forward on feature-major x (features, N), batch norm folded into the linear layers."""
+    def eval_forward(self, x: th.Tensor, affines: list[tuple[th.Tensor, th.Tensor]] | None = None) -> th.Tensor:
+        """Eval-mode forward on feature-major x (features, N), batch norm folded into the linear layers (``affines``:
+        those of :meth:`eval_affines` taken earlier, e.g. a frozen copy; default: the current ones)."""
         h = x
-        for (weight, bias), slope in zip(self.eval_affines(), self.spec.slopes, strict=True):
+        for (weight, bias), slope in zip(affines or self.eval_affines(), self.spec.slopes, strict=True):
             h = th.addmm(bias.unsqueeze(1), weight, h)
             if slope is not None:
                 th.nn.functional.leaky_relu_(h, slope)
@@ -225,6 +226,10 @@ class FastUpdater(Updater):
         super().__init__(policy, settings)
         self.actor_net = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
         self.critic_net = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
+        # actor_proximal: pi_old = the actor at the start of the update (eval mode), as frozen folded affines
+        self.old_actor_affines = None
+        if settings.actor_proximal > 0:
+            self.old_actor_affines = [(w.clone(), b.clone()) for w, b in self.actor_net.eval_affines()]
 
     def reset_critic(self) -> None:
         super().reset_critic()
@@ -291,10 +296,16 @@ class FastUpdater(Updater):
         critic_full = eager_steps.EvalCritic(
             critic_affines, self.critic_net.spec.slopes, obs_part_full, action_dim, self.critic_net.spec.sizes, n
         )
-        objective = None
+        old_affines, coef = self.old_actor_affines, self.settings.actor_proximal
+        old_pi_full = None  # pi_old on the whole buffer: once per fit when every step takes it all
+        if old_affines is not None and n == n_full:
+            old_pi_full = net.eval_forward(obs_t, old_affines)
+        objective = proximal = None
         for step in range(steps):
             idx = self.batch_indices(n_full)
             o, critic = (obs_t, critic_full) if idx is None else (obs_t[:, idx], critic_full.subset(idx))
+            if old_affines is not None:
+                proximal = (coef, old_pi_full if idx is None else net.eval_forward(o, old_affines))
             objective = eager_steps.actor_step(
                 net,
                 ws,
@@ -304,6 +315,7 @@ class FastUpdater(Updater):
                 self.settings.max_grad_norm,
                 self.settings.inverting_gradients,
                 want_objective=step == steps - 1,
+                proximal=proximal,
             )
         net.finish_fit(fixed)
         return objective  # type: ignore[return-value]

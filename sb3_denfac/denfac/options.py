@@ -2,8 +2,9 @@
 
 The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
 as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
-critic should sample D the same way) and a slower change of the policy. Both are implemented by the autograd updater
-(:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`); the fast updater does not support them.
+critic should sample D the same way) and a slower change of the policy. The autograd updater
+(:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`) implements both; the fast updater
+(:class:`~sb3_denfac.denfac.fast.FastUpdater`) implements the proximal actor, not the prioritised sampling.
 
 **Prioritised sampling of D** (``prioritized``; Schaul et al. 2016, "Prioritized Experience Replay", proportional
 variant). At every fitted iteration k, with the targets q_k of eq. (4), the TD errors of the whole buffer are
@@ -56,15 +57,15 @@ def check_options(
             f"prioritized={prioritized!r} draws mini-batches from the priorities and needs an int batch_size, "
             "got batch_size=None (full batch)"
         )
-    unsupported = autograd_only(prioritized, proximal)
+    unsupported = autograd_only(prioritized)
     if update_path == "fast" and unsupported:
         raise ValueError(fast_refusal(unsupported))
     return prioritized, alpha, beta, eps, proximal
 
 
-def autograd_only(prioritized: str, proximal: float) -> list[str]:
+def autograd_only(prioritized: str) -> list[str]:
     """The options that are on and that only the autograd updater implements."""
-    return [f"prioritized={prioritized!r}"] * (prioritized != "none") + [f"actor_proximal={proximal:g}"] * (proximal > 0)
+    return [f"prioritized={prioritized!r}"] * (prioritized != "none")
 
 
 def fast_refusal(unsupported: list[str]) -> str:

@@ -14,8 +14,8 @@
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
-(hand-written steps on flat parameters). The options of :mod:`~sb3_denfac.denfac.options` (prioritised sampling,
-proximal actor) exist in the autograd updater only.
+(hand-written steps on flat parameters). Of the options of :mod:`~sb3_denfac.denfac.options`, both implement the
+proximal actor; prioritised sampling exists in the autograd updater only.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class FitSettings:
 
     def autograd_only(self) -> list[str]:
         """The options that are on and that only :class:`AutogradUpdater` implements (:mod:`~.options`)."""
-        return autograd_only(self.prioritized, self.actor_proximal)
+        return autograd_only(self.prioritized)
 
 
 class Updater(ABC):
