@@ -1,16 +1,20 @@
 """Optuna samplers and converters for the RL Zoo (``rl_zoo3.hyperparams_opt`` conventions).
 
 Each ``sample_<algo>_params(trial, n_actions, n_envs, additional_args)`` suggests values under the names stored in
-``trial.params`` and returns ``convert_<algo>_params(those values)``, so the zoo's ``--trial-id`` path (which calls the
-converter on a stored trial's params) rebuilds exactly the hyperparameters that trial trained with.
+``trial.params`` and returns ``convert_<algo>_params(those values)`` (with the entry's ``policy_kwargs``, below), so the
+zoo's ``--trial-id`` path (which calls the converter on a stored trial's params) rebuilds exactly the hyperparameters
+that trial trained with.
 
 Search spaces follow the dimensions of the paper's Figure 5 (learning rates alpha_a / alpha_c, inverting gradient,
 mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes.
 gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
 ``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
 
-The YAML entry's other ``policy_kwargs`` (activation, batch norm, init) are kept: :data:`SAMPLER_CONTEXT` holds them
-(set by :func:`sb3_denfac.zoo.prepare_train_args`) and the sampled ``net_arch`` is merged into a copy.
+The converters return only what was sampled (``policy_kwargs`` holds just the sampled ``net_arch``). The zoo would let
+that replace the YAML entry's ``policy_kwargs`` (batch norm, init, activation); :func:`with_entry_policy_kwargs` merges
+it over them instead. The samplers read the entry's ``policy_kwargs`` from the trial's user attribute
+:data:`ENTRY_POLICY_KWARGS`, which ``sb3_denfac.zoo``'s ExperimentManager sets before sampling (so the study records
+them too); that manager applies the same merge to a converted ``--trial-id``.
 """
 
 from __future__ import annotations
@@ -19,17 +23,26 @@ from typing import Any
 
 import optuna
 
-#: ``policy_kwargs`` of the YAML entry being tuned (set by ``sb3_denfac.zoo``); sampled keys are merged into a copy.
-SAMPLER_CONTEXT: dict[str, Any] = {"policy_kwargs": {}}
+#: Trial user attribute with the YAML entry's ``policy_kwargs`` (a mapping), set by ``sb3_denfac.zoo`` for each trial.
+ENTRY_POLICY_KWARGS = "entry_policy_kwargs"
 
 #: Network sizes offered to Optuna, by name (categorical choices must be plain values).
 ACTOR_ARCHS: dict[str, list[int]] = {"5": [5], "20": [20], "20-10": [20, 10], "64-64": [64, 64]}
 CRITIC_ARCHS: dict[str, list[int]] = {"50-7": [50, 7], "64-64": [64, 64], "256-256": [256, 256]}
 
 
+def with_entry_policy_kwargs(hyperparams: dict[str, Any], entry_policy_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``hyperparams`` with their ``policy_kwargs`` merged over the YAML entry's (sampled keys win)."""
+    return {**hyperparams, "policy_kwargs": {**entry_policy_kwargs, **hyperparams.get("policy_kwargs", {})}}
+
+
+def _sampled(trial: optuna.Trial, hyperparams: dict[str, Any]) -> dict[str, Any]:
+    return with_entry_policy_kwargs(hyperparams, trial.user_attrs.get(ENTRY_POLICY_KWARGS) or {})
+
+
 def _policy_kwargs(params: dict[str, Any], critic: bool = True, critic_key: str = "qf") -> dict[str, Any]:
-    """The YAML entry's policy_kwargs with the sampled ``net_arch``."""
-    policy_kwargs = dict(SAMPLER_CONTEXT.get("policy_kwargs") or {})
+    """The sampled ``net_arch``, as policy_kwargs."""
+    policy_kwargs: dict[str, Any] = {}
     if "actor_arch" in params:
         net_arch: dict[str, list[int]] = {"pi": list(ACTOR_ARCHS[params["actor_arch"]])}
         if critic and "critic_arch" in params:
@@ -68,7 +81,7 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_denfac_params(params)
+    return _sampled(trial, convert_denfac_params(params))
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -97,7 +110,7 @@ def sample_ddpg_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_ddpg_params(params)
+    return _sampled(trial, convert_ddpg_params(params))
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -126,7 +139,7 @@ def sample_nfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additio
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_value_critic_params(params)
+    return _sampled(trial, convert_value_critic_params(params))
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -144,7 +157,7 @@ def sample_cacla_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
     }
-    return convert_value_critic_params(params)
+    return _sampled(trial, convert_value_critic_params(params))
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -154,7 +167,7 @@ def sample_cacla_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
 
 def convert_cmaes_params(params: dict[str, Any]) -> dict[str, Any]:
     hyperparams = _copy_except(params, "actor_arch")
-    policy_kwargs = dict(SAMPLER_CONTEXT.get("policy_kwargs") or {})
+    policy_kwargs: dict[str, Any] = {}
     if "actor_arch" in params:
         policy_kwargs["net_arch"] = list(ACTOR_ARCHS[params["actor_arch"]])  # one network: a plain list
     hyperparams["policy_kwargs"] = policy_kwargs
@@ -170,7 +183,7 @@ def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
         "sigma": trial.suggest_float("sigma", 0.0, 0.3),
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
     }
-    return convert_cmaes_params(params)
+    return _sampled(trial, convert_cmaes_params(params))
 
 
 #: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.register`.

@@ -14,6 +14,7 @@ import optuna
 import pytest
 import sqlalchemy
 import torch as th
+import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -134,19 +135,33 @@ def _study(logs: Path, algo: str) -> optuna.Study:
 
 
 def test_optimize_on_sqlite_resumes_the_study(tmp_path: Path) -> None:
+    """The default study resumes; each trial trains with (and records) the entry's policy_kwargs around the sampled
+    net_arch, and ``--trial-id`` rebuilds both from the same default study."""
     logs = tmp_path / "logs"
-    argv = ["train", "--algo", OPTIMIZE_ALGO, "--env", ENV, "-n", "200", "-f", str(logs), "-optimize"]
-    argv += ["--n-evaluations", "1", "--eval-episodes", "1", "--sampler", "random", "--pruner", "none"]
-    argv += ["--no-optim-plots", "--verbose", "0"]
-    zoo.main([*argv, "--n-trials", "2", "--seed", "1"])
+    entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path(OPTIMIZE_ALGO)), ENV)
+    entry_policy_kwargs = {**entry["policy_kwargs"], "batch_norm": True}  # not the policy's default, not sampled
+    conf = tmp_path / "conf.yml"
+    conf.write_text(yaml.safe_dump({ENV: {**entry, "policy_kwargs": entry_policy_kwargs}}))
+    argv = ["train", "--algo", OPTIMIZE_ALGO, "--env", ENV, "-n", "200", "-f", str(logs), "--conf-file", str(conf)]
+    argv += ["--verbose", "0"]
+    tune = ["-optimize", "--n-evaluations", "1", "--eval-episodes", "1", "--sampler", "random", "--pruner", "none"]
+    tune += ["--no-optim-plots"]
+    zoo.main([*argv, *tune, "--n-trials", "2", "--seed", "1"])
     first = _study(logs, OPTIMIZE_ALGO).trials
     assert len(first) == 2
     assert all(t.state == optuna.trial.TrialState.COMPLETE for t in first)
+    assert all(t.user_attrs[zoo_samplers.ENTRY_POLICY_KWARGS] == entry_policy_kwargs for t in first)
 
-    zoo.main([*argv, "--n-trials", "1", "--seed", "2"])
+    zoo.main([*argv, *tune, "--n-trials", "1", "--seed", "2"])
     trials = _study(logs, OPTIMIZE_ALGO).trials
     assert len(trials) == 3
     assert [t.params for t in trials[:2]] == [t.params for t in first]
+
+    zoo.main([*argv, "--trial-id", "1", "--eval-freq", "-1", "--seed", "3"])  # the zoo ignores --trial-id 0
+    (model_path,) = (logs / OPTIMIZE_ALGO).glob(f"*/{ENV_FOLDER}.zip")
+    policy_kwargs = zoo.algorithm_class(OPTIMIZE_ALGO).load(model_path, device="cpu").policy_kwargs
+    assert policy_kwargs["batch_norm"] is True
+    assert policy_kwargs["net_arch"] == zoo_samplers.ACTOR_ARCHS[trials[1].params["actor_arch"]]
 
 
 def test_killed_optimisation_keeps_completed_trials(tmp_path: Path) -> None:
@@ -186,19 +201,25 @@ def test_killed_optimisation_keeps_completed_trials(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("algo", sorted(zoo_samplers.SAMPLERS))
 def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
-    """Every sampler's output (merged into the YAML entry, as the zoo does) passes validation; converter == sampler."""
+    """Every sampler's output, merged into the YAML entry as the zoo does, passes validation and builds a model; it
+    keeps the entry's other policy_kwargs (read from the trial); converter + the same merge == sampler."""
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path(algo)), ENV)
-    zoo_samplers.SAMPLER_CONTEXT["policy_kwargs"] = dict(entry.get("policy_kwargs", {}))
+    entry_policy_kwargs = {"batch_norm": True, **entry["policy_kwargs"]}  # a key besides net_arch, to be kept
+    entry["policy_kwargs"] = entry_policy_kwargs
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     for _ in range(5):
         trial = study.ask()
+        trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry_policy_kwargs)
         sampled = zoo_samplers.SAMPLERS[algo](trial, 1, 1, {})
         assert "train_freq" not in sampled
+        assert {k: v for k, v in sampled["policy_kwargs"].items() if k != "net_arch"} == {
+            k: v for k, v in entry_policy_kwargs.items() if k != "net_arch"
+        }
+        converted = zoo_samplers.CONVERTERS[algo](trial.params)
+        assert zoo_samplers.with_entry_policy_kwargs(converted, entry_policy_kwargs) == sampled
         merged = {**entry, **sampled}
-        zoo.validate_entry(algo, merged)
-        assert zoo_samplers.CONVERTERS[algo](trial.params) == sampled
-        kwargs = {key: value for key, value in merged.items() if key not in zoo.ZOO_KEYS}
-        zoo.algorithm_class(algo)(env=gym.make(ENV), device="cpu", **kwargs)  # the values are usable too
+        zoo.validate_entry(algo, merged, env_id=ENV)
+        zoo.make_model(algo, ENV, merged, device="cpu").get_env().close()  # the values are usable too
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)

@@ -1,0 +1,320 @@
+"""The RL Zoo's hyperparameter files for this package: registration, loading, checking, and a model built from an entry.
+
+- :func:`register` adds this package's algorithms to ``rl_zoo3.ALGOS`` (the SBX pattern) and their Optuna samplers to
+  ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` / ``HYPERPARAMS_CONVERTER``.
+- :func:`load_config_file` reads a zoo YAML file; malformed YAML names the file and the line.
+- :func:`validate_entry` checks one entry the way the zoo will use it: the zoo's own preprocessing turns the entry
+  into constructor arguments (so whatever the zoo consumes itself, ``n_timesteps``, ``normalize``, ``noise_type``...,
+  needs no list here), the arguments left must be the constructor's (an unknown one is named with the closest valid
+  name), and the constructor itself checks their values (:mod:`sb3_denfac.common.checks`), without building networks.
+  Two YAML pitfalls that no constructor can explain are caught before: a float written ``1e-3`` (a string in YAML) and
+  a quoted flag (``'yes'``).
+- :func:`make_model` builds the env and the model exactly as the zoo's ``ExperimentManager`` does, outside a zoo run.
+
+rl_zoo3 makes the step from a YAML entry to constructor arguments only in two private ``ExperimentManager`` methods
+(its public ``setup_experiment`` also creates log folders, writes config files and needs a file on disk).
+:func:`_zoo_preprocess` is the one place that calls them, and says so if an rl_zoo3 release drops them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import difflib
+import importlib
+import importlib.util
+import inspect
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sb3_denfac.envs import ENV_IDS
+
+#: This package's algorithms, imported lazily by :func:`algorithm_class` ("zoo name" -> "module:Class").
+ALGORITHMS: dict[str, str] = {
+    "denfac": "sb3_denfac.denfac:DENFAC",
+    "ddpg": "sb3_denfac.ddpg:DDPG",
+    "nfac": "sb3_denfac.nfac:NFAC",
+    "cacla": "sb3_denfac.cacla:CACLA",
+    "cmaes": "sb3_denfac.cmaes:CMAES",
+}
+
+HYPERPARAMS_DIR = Path(importlib.util.find_spec("sb3_denfac.hyperparams").submodule_search_locations[0])
+"""The zoo YAML files: ``hyperparams/`` of the repository, installed as the package data of ``sb3_denfac.hyperparams``."""
+
+#: Ids of the paper's environments registered by ``import sb3_denfac`` (their one list: ``sb3_denfac.envs``).
+PACKAGE_ENV_IDS = ENV_IDS
+
+#: The env a file's ``default`` entry is checked on (any continuous-action env would do; this one is the cheapest).
+DEFAULT_ENTRY_ENV = "sb3_denfac/ContinuousCartPole-v0"
+
+#: The private ExperimentManager steps :func:`_zoo_preprocess` relies on (present in rl_zoo3 2.3 to 2.9.2 at least).
+ZOO_PREPROCESSING_STEPS = ("_preprocess_hyperparams", "_preprocess_action_noise")
+
+
+class ZooConfigError(ValueError):
+    """A hyperparameter file or command line that cannot work; raised before anything is trained."""
+
+
+def algorithm_class(name: str) -> type:
+    """The class registered under zoo name ``name`` (this package's algorithms are imported on first use)."""
+    if name in ALGORITHMS:
+        module_name, class_name = ALGORITHMS[name].split(":")
+        return getattr(importlib.import_module(module_name), class_name)
+    import rl_zoo3
+
+    if name not in rl_zoo3.ALGOS:
+        raise ZooConfigError(f"Unknown algorithm {name!r}; known: {', '.join(sorted(set(rl_zoo3.ALGOS) | set(ALGORITHMS)))}")
+    return rl_zoo3.ALGOS[name]
+
+
+def register() -> None:
+    """Register the envs (``import sb3_denfac``), the algorithms and their Optuna samplers with the RL Zoo. Idempotent."""
+    import rl_zoo3
+    from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+    from stable_baselines3 import DDPG as SB3DDPG
+
+    import sb3_denfac  # noqa: F401  (registers the environments)
+    from sb3_denfac import zoo_samplers
+
+    rl_zoo3.ALGOS.setdefault("sb3_ddpg", SB3DDPG)
+    HYPERPARAMS_SAMPLER.setdefault("sb3_ddpg", HYPERPARAMS_SAMPLER["ddpg"])
+    HYPERPARAMS_CONVERTER.setdefault("sb3_ddpg", HYPERPARAMS_CONVERTER["ddpg"])
+    for name in ALGORITHMS:
+        rl_zoo3.ALGOS[name] = algorithm_class(name)
+    HYPERPARAMS_SAMPLER.update(zoo_samplers.SAMPLERS)
+    HYPERPARAMS_CONVERTER.update(zoo_samplers.CONVERTERS)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Files and entries
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def default_config_path(algo: str) -> Path:
+    return HYPERPARAMS_DIR / f"{algo}.yml"
+
+
+def load_config_file(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
+    """Read a zoo YAML file (``{env id: {key: value}}``); malformed YAML names the file and the line."""
+    path = Path(path)
+    if not path.is_file():
+        raise ZooConfigError(f"Hyperparameter file not found: {path}")
+    try:
+        content = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None) or getattr(e, "context_mark", None)
+        where = f"{path}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else str(path)
+        problem = getattr(e, "problem", None) or str(e)
+        raise ZooConfigError(f"Malformed YAML in {where}: {problem}") from e
+    if content is None:
+        content = {}
+    if not isinstance(content, dict):
+        raise ZooConfigError(f"{path}: expected a mapping from env ids to hyperparameters, got {type(content).__name__}")
+    for env_id, entry in content.items():
+        if not isinstance(entry, dict):
+            raise ZooConfigError(f"{path}: the entry for {env_id!r} must be a mapping of hyperparameters, got {entry!r}")
+    return content
+
+
+def check_env_id(env_id: str, where: str = "") -> None:
+    """Fail with the package's env ids (and the closest registered one) if ``env_id`` is not a registered Gym id."""
+    import gymnasium as gym
+
+    known = sorted(gym.registry.keys())
+    if env_id in known:
+        return
+    close = difflib.get_close_matches(env_id, known, n=3, cutoff=0.6)
+    hint = f" Did you mean {', '.join(close)}?" if close else ""
+    raise ZooConfigError(
+        f"Unknown env id {env_id!r}{where}.{hint} This package registers: {', '.join(PACKAGE_ENV_IDS)} "
+        f"(plus every Gymnasium id, e.g. Pendulum-v1; {len(known)} ids are registered)."
+    )
+
+
+def check_env_keys(config: dict[str, Any], path: str | os.PathLike) -> None:
+    """Every key of a zoo file is a registered env id, ``default`` or ``atari`` (the zoo's fallbacks)."""
+    for key in config:
+        if key not in ("default", "atari"):
+            check_env_id(str(key), where=f" (a key of {path})")
+
+
+def select_entry(config: dict[str, dict[str, Any]], env_id: str, path: str | os.PathLike = "") -> dict[str, Any]:
+    """The entry the zoo will use for ``env_id``: its own key, else ``default`` (Atari fallback not needed here)."""
+    if env_id in config:
+        return dict(config[env_id])
+    if "default" in config:
+        return dict(config["default"])
+    raise ZooConfigError(
+        f"No hyperparameters for {env_id!r} in {path} and no 'default' entry; entries: {', '.join(map(str, config))}"
+    )
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# The zoo's preprocessing, and a model built from an entry
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def _zoo_preprocess(algo: str, env_id: str, hyperparams: dict[str, Any], seed: int, monitor_dir: Any) -> tuple:
+    """``(manager, env, kwargs)`` as ``ExperimentManager.setup_experiment`` makes them from a YAML entry (schedules,
+    ``normalize``, ``policy_kwargs`` strings, wrappers, ``train_freq`` lists, ``noise_type``...), without its log
+    folders, config files or callbacks. ``kwargs`` are what the zoo passes to the constructor besides ``env``,
+    ``seed``, ``verbose``, ``device`` and ``tensorboard_log``."""
+    import rl_zoo3
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    missing = [name for name in ZOO_PREPROCESSING_STEPS if not hasattr(ExperimentManager, name)]
+    if missing:
+        raise ZooConfigError(
+            f"rl_zoo3 {rl_zoo3.__version__} has no ExperimentManager.{', '.join(missing)}, which sb3_denfac.zoo_config "
+            "uses to build a model from a YAML entry; install a supported rl_zoo3 (constraints-dev.txt: 2.9.2)"
+        )
+    manager = ExperimentManager(argparse.Namespace(), algo, env_id, log_folder=os.devnull, seed=seed, verbose=0)
+    hyperparams = copy.deepcopy(hyperparams)  # the zoo edits nested values too (normalize gets gamma)
+    kwargs, manager.env_wrapper, _, manager.vec_env_wrapper = manager._preprocess_hyperparams(hyperparams)
+    if monitor_dir is not None:
+        manager.save_path = str(monitor_dir)
+    env = manager.create_envs(manager.n_envs, no_log=monitor_dir is None)
+    return manager, env, manager._preprocess_action_noise(kwargs, {}, env)
+
+
+def make_model(
+    algo: str,
+    env_id: str,
+    hyperparams: dict[str, Any],
+    seed: int = 0,
+    monitor_dir: str | os.PathLike | None = None,
+    **model_kwargs: Any,
+) -> Any:
+    """Build the env and the model exactly as ``rl_zoo3``'s ExperimentManager does from a YAML entry, outside a zoo run.
+
+    Used by the quickstart and the Figure 3 benchmark.
+
+    :param monitor_dir: where SB3's Monitor writes ``monitor.csv`` (with the entry's ``monitor_kwargs``); None: no file.
+    :param model_kwargs: extra constructor arguments (e.g. ``tensorboard_log``, ``verbose``, ``device``).
+    """
+    register()
+    hyperparams = {"n_timesteps": 0, "policy": "MlpPolicy", **hyperparams}  # the zoo needs both; callers budget episodes
+    _, env, kwargs = _zoo_preprocess(algo, env_id, hyperparams, seed, monitor_dir)
+    return algorithm_class(algo)(env=env, seed=seed, **{"verbose": 0, **kwargs, **model_kwargs})
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Validation
+# --------------------------------------------------------------------------------------------------------------------
+
+
+def _looks_like_float(value: Any) -> bool:
+    try:
+        float(value)
+    except (TypeError, ValueError):
+        return False
+    return isinstance(value, str)
+
+
+def _check_yaml_pitfalls(algo: str, params: dict[str, inspect.Parameter], entry: dict[str, Any], where: str) -> None:
+    """Values YAML reads otherwise than they look, before the zoo or a constructor gives a puzzling message."""
+    for key, value in entry.items():
+        if _looks_like_float(value):
+            raise ZooConfigError(
+                f"{key!r} of algorithm {algo!r}{where} is the string {value!r}: YAML reads a float without a dot as a "
+                f"string; write it with a dot (0.001) or as !!float {value}."
+            )
+        if key in params and isinstance(params[key].default, bool) and not isinstance(value, bool):
+            raise ZooConfigError(
+                f"{key!r} of algorithm {algo!r}{where} is a flag: write true or false (a YAML bool), got {value!r}"
+            )
+
+
+def _check_policy_kwargs(algo: str, cls: type, policy: Any, policy_kwargs: Any, where: str) -> None:
+    """Unknown ``policy_kwargs`` keys, named against the policy class's signature (the networks are not built here)."""
+    policy_cls = cls.policy_aliases.get(policy) if isinstance(policy, str) else policy
+    if not isinstance(policy_cls, type) or not isinstance(policy_kwargs, dict):
+        return
+    params = inspect.signature(policy_cls.__init__).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    for key in policy_kwargs:
+        if key not in params:
+            valid = sorted(set(params) - {"self", "observation_space", "action_space", "lr_schedule"})
+            raise ZooConfigError(
+                f"Unknown policy_kwargs key {key!r} for {algo!r} ({policy_cls.__name__}){where}. Valid: {', '.join(valid)}."
+            )
+
+
+#: The constructor arguments besides ``env`` that the zoo passes itself (ExperimentManager.setup_experiment), as given
+#: to the constructor by :func:`validate_entry`: an entry repeating one fails there as it would in the zoo.
+_SET_BY_THE_ZOO = {"tensorboard_log": None, "seed": 0, "verbose": 0, "device": "cpu"}
+
+
+def validate_entry(algo: str, entry: dict[str, Any], source: str = "", env_id: str = DEFAULT_ENTRY_ENV) -> None:
+    """Check one YAML entry (after ``-params`` overrides) as the zoo will use it for ``env_id``; see the module doc."""
+    cls = algorithm_class(algo)
+    where = f" ({source})" if source else ""
+    params = {name: p for name, p in inspect.signature(cls.__init__).parameters.items() if name not in ("self", "env")}
+    for key, example in (("n_timesteps", "the zoo's training budget in env steps"), ("policy", "e.g. policy: 'MlpPolicy'")):
+        if key not in entry:
+            raise ZooConfigError(f"{algo}{where}: missing {key!r} ({example})")
+    policy = entry["policy"]
+    if isinstance(policy, str) and "." not in policy and policy not in cls.policy_aliases:
+        raise ZooConfigError(
+            f"Unknown policy {policy!r} for algorithm {algo!r}{where}; available: {', '.join(cls.policy_aliases)} "
+            "(or a full class path such as my_package.MyPolicy)"
+        )
+    _check_yaml_pitfalls(algo, params, entry, where)
+    register()
+    try:
+        manager, env, kwargs = _zoo_preprocess(algo, env_id, entry, seed=0, monitor_dir=None)
+    except ZooConfigError:
+        raise
+    except Exception as e:  # the zoo's own messages (bad schedule, wrapper or callback path, eval'd string...)
+        raise ZooConfigError(f"{algo}{where}: the zoo cannot read this entry: {type(e).__name__}: {e}") from e
+    try:
+        if manager.n_timesteps <= 0:
+            raise ZooConfigError(f"{algo}{where}: n_timesteps must be a positive number, got {entry['n_timesteps']!r}")
+        keywords = manager.monitor_kwargs.get("info_keywords", ())
+        if not isinstance(keywords, tuple):
+            raise ZooConfigError(
+                f"{algo}{where}: monitor_kwargs info_keywords must be a tuple (SB3's Monitor concatenates tuples), got "
+                f"{keywords!r}; YAML has no tuples: write monitor_kwargs: \"dict(info_keywords=('paper_performance',))\""
+            )
+        if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+            for key in kwargs:
+                if key not in params:
+                    close = difflib.get_close_matches(key, list(params), n=1)
+                    hint = f" Did you mean {close[0]!r}?" if close else ""
+                    valid = sorted(set(params) - {*_SET_BY_THE_ZOO, "_init_setup_model"})
+                    raise ZooConfigError(
+                        f"Unknown hyperparameter {key!r} for algorithm {algo!r} ({cls.__name__}){where}.{hint} "
+                        f"Valid: {', '.join(valid)}, plus the keys the zoo reads itself (n_timesteps, normalize, "
+                        "n_envs, env_kwargs, ...: see rl_zoo3's documentation)."
+                    )
+        _check_policy_kwargs(algo, cls, kwargs["policy"], kwargs.get("policy_kwargs"), where)
+        try:  # the constructor checks the values (no networks built)
+            cls(env=env, **_SET_BY_THE_ZOO, _init_setup_model=False, **kwargs)
+        except (TypeError, ValueError, AssertionError) as e:
+            hint = f" (the zoo sets {', '.join(_SET_BY_THE_ZOO)} from its command line)" if isinstance(e, TypeError) else ""
+            raise ZooConfigError(f"{algo}{where}: {cls.__name__} refuses this entry: {e}{hint}") from e
+    finally:
+        env.close()
+
+
+def validate_config_file(path: str | os.PathLike, algo: str, check_env_ids: bool = True) -> dict[str, dict[str, Any]]:
+    """Load ``path`` and validate every entry for ``algo`` (env ids must be registered unless ``check_env_ids`` is False)."""
+    config = load_config_file(path)
+    if check_env_ids:
+        check_env_keys(config, path)
+    for env_id, entry in config.items():
+        target = str(env_id) if env_id not in ("default", "atari") else DEFAULT_ENTRY_ENV
+        validate_entry(algo, entry, source=f"{path}, entry {env_id!r}", env_id=target)
+    return config
+
+
+def load_hyperparams(algo: str, env_id: str, conf_file: str | os.PathLike | None = None) -> dict[str, Any]:
+    """The validated YAML entry the zoo would use for (``algo``, ``env_id``), from this package's file by default."""
+    path = Path(conf_file) if conf_file is not None else default_config_path(algo)
+    entry = select_entry(load_config_file(path), env_id, path)
+    validate_entry(algo, entry, source=f"{path}, entry {env_id!r}", env_id=env_id)
+    return entry
