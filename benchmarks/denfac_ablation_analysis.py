@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sb3_denfac.common.performance import best_so_far
+
 RESULTS = Path(__file__).resolve().parent / "results" / "denfac_ablation"
 # return threshold per env for "episode of first return above"
 DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot": 30, "invpendulum": 100}
@@ -43,7 +45,7 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             score = ret
             th_ = THRESH.get(env)
             reached = np.flatnonzero(ret >= th_) if th_ is not None else np.array([])
-        best = np.maximum.accumulate(score)
+        best = best_so_far(score, lower_is_better=False)  # score: higher is better on every env (Acrobot: -steps)
         n = len(ret)
         first = int(reached[0]) + 1 if len(reached) else np.nan
         # stability: fraction of episodes after the first success falling below half the best (returns shifted by

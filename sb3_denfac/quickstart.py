@@ -24,17 +24,11 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.monitor import load_results
 
-from sb3_denfac import zoo
+from sb3_denfac import zoo_config
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback, ProgressBarCallback
+from sb3_denfac.common.performance import best_so_far
 from sb3_denfac.envs import PAPER_PERFORMANCE_KEY
-
-#: Which direction is better for each env's paper measure (Acrobot: steps to reach the goal).
-LOWER_IS_BETTER = ("Acrobot",)
-
-
-def best_so_far(values: np.ndarray, lower_is_better: bool) -> np.ndarray:
-    """Best registered performance since the first episode (running min or max)."""
-    return np.minimum.accumulate(values) if lower_is_better else np.maximum.accumulate(values)
+from sb3_denfac.envs.facts import env_facts
 
 
 def plot_learning_curve(
@@ -74,7 +68,7 @@ def evaluate(model, env_id: str, seed: int) -> float:
 
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--algo", default="denfac", choices=[*zoo.ALGORITHMS, "td3", "sac", "crossq"])
+    parser.add_argument("--algo", default="denfac", choices=[*zoo_config.ALGORITHMS, "td3", "sac", "crossq"])
     parser.add_argument("--env", default="sb3_denfac/ContinuousAcrobot-v0")
     parser.add_argument("--episodes", type=int, default=50, help="training budget in episodes")
     parser.add_argument("--seed", type=int, default=0)
@@ -85,10 +79,10 @@ def main(argv: list[str] | None = None) -> dict:
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
     try:  # before anything is written
-        zoo.register()
-        zoo.check_env_id(args.env)
-        hyperparams = zoo.load_hyperparams(args.algo, args.env)  # the package's zoo YAML (the paper's Figure 5 values)
-    except zoo.ZooConfigError as error:
+        zoo_config.register()
+        zoo_config.check_env_id(args.env)
+        hyperparams = zoo_config.load_hyperparams(args.algo, args.env)  # the package's zoo YAML (the paper's Figure 5 values)
+    except zoo_config.ZooConfigError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")
     # The paper's networks are tiny: extra intra-op threads only add synchronisation. Measured on a loaded 2-core
     # machine, a DENFAC update took 0.1 s with one thread and up to 33 s with the default two.
@@ -96,10 +90,10 @@ def main(argv: list[str] | None = None) -> dict:
 
     run_dir = args.log_dir / f"{args.algo}_{args.env.replace('/', '-')}_seed{args.seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
-    model = zoo.make_model(  # built as the RL Zoo builds it
+    model = zoo_config.make_model(  # built as the RL Zoo builds it
         args.algo, args.env, hyperparams, seed=args.seed, monitor_dir=run_dir, tensorboard_log=str(run_dir / "tensorboard")
     )
-    lower = any(name in args.env for name in LOWER_IS_BETTER)
+    lower = env_facts(args.env).lower_is_better
     # Counts episodes, stops after the budget and saves the policy of each new best episode.
     episodes = EpisodePerformanceCallback(args.episodes, lower_is_better=lower, best_model_path=str(run_dir / "best_model"))
     callbacks = [episodes, *([ProgressBarCallback(max_episodes=args.episodes)] if args.progress_bar else [])]

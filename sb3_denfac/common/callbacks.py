@@ -13,6 +13,8 @@ from stable_baselines3.common.callbacks import ProgressBarCallback as SB3Progres
 from stable_baselines3.common.type_aliases import MaybeCallback
 from tqdm import TqdmExperimentalWarning
 
+from sb3_denfac.common.performance import best_so_far
+
 
 class EpisodePerformanceCallback(BaseCallback):
     """
@@ -109,12 +111,7 @@ class EpisodePerformanceCallback(BaseCallback):
         else:
             performance = ep_return if self.fallback_to_return else float("nan")
         previous = self.best_so_far
-        if np.isnan(previous):
-            best = performance
-        elif np.isnan(performance):
-            best = previous
-        else:
-            best = min(previous, performance) if self.lower_is_better else max(previous, performance)
+        best = float(best_so_far([previous, performance], self.lower_is_better)[-1])
         record = {
             "episode": len(self.records) + 1,
             "performance": performance,
