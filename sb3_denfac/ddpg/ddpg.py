@@ -219,7 +219,9 @@ class DDPG(
 
             polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
             polyak_update(self.actor.parameters(), self.actor_target.parameters(), self.tau)
-            # Batch-norm running statistics are copied, not averaged (SB3 GH#996).
+            # Batch-norm running statistics are buffers, not parameters: the target gets a hard copy (tau = 1), as in
+            # SB3's TD3 and SAC; averaging running means and variances would not make sense
+            # (https://github.com/DLR-RM/stable-baselines3/issues/996).
             polyak_update(self.critic_batch_norm_stats, self.critic_batch_norm_stats_target, 1.0)
             polyak_update(self.actor_batch_norm_stats, self.actor_batch_norm_stats_target, 1.0)
 
