@@ -1,7 +1,15 @@
-"""Test-wide settings: one torch thread per test process (CI runs pytest -n 2 on a 2-core machine); shared fixtures."""
+"""Test-wide settings: one torch thread per test process (CI runs pytest -n 2 on a 2-core machine); shared fixtures.
+
+The tiny algorithm variants of the conformance and reliability tests are defined here: a test marked
+``@pytest.mark.algorithms("all")`` (or ``"off_policy"``, ``"with_learning_rate"``) runs once per variant of the group,
+given as its ``name`` argument; the helpers (``make_model``, ``make_env``, ``algo_class``...) are fixtures of the same
+name.
+"""
 
 from __future__ import annotations
 
+import importlib
+from copy import deepcopy
 from typing import Any
 
 import gymnasium as gym
@@ -9,9 +17,13 @@ import numpy as np
 import pytest
 import torch as th
 from gymnasium import spaces
+from stable_baselines3 import TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.preprocessing import get_flattened_obs_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
+import sb3_denfac  # noqa: F401  (registers the paper envs)
+from sb3_denfac.common.checks import InputChecksMixin
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.presets import paper
 
@@ -77,3 +89,235 @@ def never_ending_env() -> type[gym.Env]:
 def batch_norm_extractor() -> type[BaseFeaturesExtractor]:
     """SB3's batch-norm + dropout features extractor class."""
     return FlattenBatchNormDropoutExtractor
+
+
+# ----- tiny algorithm variants (conformance and reliability tests) ------------------------------------------------------
+
+EPISODE = 20  # steps per episode of every test env
+#: Variants: "denfac_plain" is DENFAC on its plain (autograd) update path ("denfac" takes the default, fast when
+#: possible); "ddpg_ig" is DDPG with inverting gradients and an unbounded actor ("ddpg": SB3's tanh actor).
+ALGOS = ["denfac", "denfac_plain", "ddpg", "ddpg_ig", "nfac", "cacla", "cmaes"]
+CLASS_PATHS = {
+    "denfac": "sb3_denfac.denfac:DENFAC",
+    "denfac_plain": "sb3_denfac.denfac:DENFAC",
+    "ddpg": "sb3_denfac.ddpg:DDPG",
+    "ddpg_ig": "sb3_denfac.ddpg:DDPG",
+    "nfac": "sb3_denfac.nfac:NFAC",
+    "cacla": "sb3_denfac.cacla:CACLA",
+    "cmaes": "sb3_denfac.cmaes:CMAES",
+}
+#: Tiny configurations: every update is a handful of gradient steps on networks of a few units.
+TINY_KWARGS: dict[str, dict[str, Any]] = {
+    "denfac": dict(
+        buffer_size=5 * EPISODE,
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
+    ),
+    "denfac_plain": dict(
+        update_path="plain",
+        buffer_size=5 * EPISODE,
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
+    ),
+    "ddpg": dict(
+        buffer_size=5 * EPISODE,
+        learning_starts=10,
+        batch_size=8,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
+    "ddpg_ig": dict(
+        inverting_gradients=True,
+        buffer_size=5 * EPISODE,
+        learning_starts=10,
+        batch_size=8,
+        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
+    ),
+    "nfac": dict(
+        n_fitted_iterations=1,
+        critic_steps=2,
+        actor_steps=2,
+        policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4])),
+    ),
+    "cacla": dict(n_steps=EPISODE, bn_window=4, policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4]))),
+    "cmaes": dict(population_size=2, policy_kwargs=dict(net_arch=[4])),
+}
+OFF_POLICY = ["denfac", "denfac_plain", "ddpg", "ddpg_ig"]
+
+
+def algo_class(name: str) -> type[BaseAlgorithm]:
+    module_name, class_name = CLASS_PATHS[name].split(":")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def make_env(episode: int = EPISODE) -> gym.Env:
+    return gym.make("Pendulum-v1", max_episode_steps=episode)
+
+
+def make_model(name: str, env: Any = None, **overrides: Any) -> BaseAlgorithm:
+    kwargs = deepcopy(TINY_KWARGS[name])
+    kwargs.update(overrides)
+    return algo_class(name)("MlpPolicy", make_env() if env is None else env, **kwargs)
+
+
+def sample_observations(space: spaces.Space, n: int = 10, seed: int = 0) -> np.ndarray:
+    space = deepcopy(space)
+    space.seed(seed)
+    return np.stack([space.sample() for _ in range(n)])
+
+
+def batch_norm_buffers(module: th.nn.Module) -> dict[str, th.Tensor]:
+    return {
+        f"{name}.{buffer}": getattr(layer, buffer).clone()
+        for name, layer in module.named_modules()
+        if isinstance(layer, th.nn.modules.batchnorm._BatchNorm)
+        for buffer in ("running_mean", "running_var")
+    }
+
+
+def assert_equal_nested(a: Any, b: Any, where: str = "") -> None:
+    """Exact equality of nested dicts / lists of tensors and scalars (optimizer state dicts included)."""
+    if isinstance(a, th.Tensor):
+        assert isinstance(b, th.Tensor) and th.equal(a, b), f"{where} differs"
+    elif isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), f"{where}: keys differ"
+        for key in a:
+            assert_equal_nested(a[key], b[key], f"{where}.{key}")
+    elif isinstance(a, (list, tuple)):
+        assert isinstance(b, (list, tuple)) and len(a) == len(b), f"{where}: lengths differ"
+        for index, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_equal_nested(x, y, f"{where}[{index}]")
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def assert_same_parameters(params_a: dict, params_b: dict) -> None:
+    """Same networks, batch-norm buffers and optimizer states."""
+    assert params_a.keys() == params_b.keys()
+    for object_name, state in params_a.items():
+        assert_equal_nested(state, params_b[object_name], object_name)
+
+
+#: The variant groups of ``@pytest.mark.algorithms(group)``.
+ALGORITHM_GROUPS: dict[str, list[str]] = {
+    "all": ALGOS,
+    "off_policy": OFF_POLICY,
+    "with_learning_rate": [name for name in ALGOS if name != "cmaes"],  # CMA-ES has no learning rate
+}
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    marker = metafunc.definition.get_closest_marker("algorithms")
+    if marker is not None:
+        metafunc.parametrize("name", ALGORITHM_GROUPS[marker.args[0]])
+
+
+@pytest.fixture
+def episode_steps() -> int:
+    """Steps per episode of every tiny test env (``make_env``)."""
+    return EPISODE
+
+
+@pytest.fixture
+def off_policy_names() -> list[str]:
+    """The off-policy variants (a replay buffer)."""
+    return OFF_POLICY
+
+
+@pytest.fixture
+def tiny_kwargs() -> dict[str, dict[str, Any]]:
+    """The constructor arguments of each tiny variant (a copy: tests may edit it)."""
+    return deepcopy(TINY_KWARGS)
+
+
+@pytest.fixture(name="algo_class")
+def algo_class_fixture() -> Any:
+    """``algo_class(name)``: the class of a variant."""
+    return algo_class
+
+
+@pytest.fixture(name="make_env")
+def make_env_fixture() -> Any:
+    """``make_env(episode=EPISODE)``: Pendulum-v1 cut to ``episode`` steps."""
+    return make_env
+
+
+@pytest.fixture(name="make_model")
+def make_model_fixture() -> Any:
+    """``make_model(name, env=None, **overrides)``: a tiny model of a variant."""
+    return make_model
+
+
+@pytest.fixture(name="sample_observations")
+def sample_observations_fixture() -> Any:
+    """``sample_observations(space, n=10, seed=0)``: a seeded batch of observations."""
+    return sample_observations
+
+
+@pytest.fixture(name="batch_norm_buffers")
+def batch_norm_buffers_fixture() -> Any:
+    """``batch_norm_buffers(module)``: copies of every batch-norm running mean and variance."""
+    return batch_norm_buffers
+
+
+@pytest.fixture(name="assert_same_parameters")
+def assert_same_parameters_fixture() -> Any:
+    """``assert_same_parameters(params_a, params_b)``: same networks, batch-norm buffers and optimizer states."""
+    return assert_same_parameters
+
+
+# ----- a bandit-like env (DENFAC tests) ----------------------------------------------------------------------------------
+
+
+class TargetActionEnv(gym.Env):
+    """Bandit-like episodes of 10 steps: obs ~ U(-1, 1)^2, reward -(a - 0.6)^2, gamma irrelevant (time limit)."""
+
+    def __init__(self, low: float = -1.0, high: float = 1.0, episode_length: int = 10):
+        self.observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.action_space = spaces.Box(low, high, (1,), np.float32)
+        self.target = low + 0.8 * (high - low)  # 0.6 in the scaled space
+        self.episode_length = episode_length
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return self.np_random.uniform(-1, 1, 2).astype(np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        scaled = 2 * (float(action[0]) - self.action_space.low[0]) / (self.action_space.high[0] - self.action_space.low[0]) - 1
+        reward = -((scaled - 0.6) ** 2)
+        truncated = self.t >= self.episode_length
+        return self.np_random.uniform(-1, 1, 2).astype(np.float32), reward, False, truncated, {}
+
+
+@pytest.fixture
+def target_action_env() -> type[gym.Env]:
+    """The class of :class:`TargetActionEnv` (the best action is 0.6 in the scaled space)."""
+    return TargetActionEnv
+
+
+# ----- a tiny SB3 algorithm with the package's input checks (reliability tests) ------------------------------------------
+
+
+class CheckedTD3(InputChecksMixin, TD3):
+    pass
+
+
+@pytest.fixture
+def checked_td3_class() -> type[TD3]:
+    """SB3's TD3 with :class:`~sb3_denfac.common.checks.InputChecksMixin` first in its bases."""
+    return CheckedTD3
+
+
+@pytest.fixture
+def make_checked_td3() -> Any:
+    """``make_checked_td3(env)``: a tiny :class:`CheckedTD3`."""
+
+    def make(env: Any) -> CheckedTD3:
+        return CheckedTD3("MlpPolicy", env, learning_starts=5, batch_size=8, buffer_size=100, policy_kwargs=dict(net_arch=[4]))
+
+    return make

@@ -8,6 +8,9 @@ import json
 import sys
 from pathlib import Path
 
+import figure3  # benchmarks/ is on the path: pyproject.toml, [tool.pytest.ini_options] pythonpath
+import figure3_stats as st
+import figure3_suites as suites
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -17,11 +20,6 @@ from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback
 from sb3_denfac.envs.facts import env_facts
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import figure3  # noqa: E402
-import figure3_stats as st  # noqa: E402
-import figure3_suites as suites  # noqa: E402
 
 
 class ScriptedEpisodesEnv(gym.Env):

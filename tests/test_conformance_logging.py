@@ -1,5 +1,6 @@
 """SB3 plugin contract, part 2: TensorBoard and custom loggers, callbacks (counts, checkpoints, evaluation, early stop),
-progress bar (after SB3's tests/test_tensorboard.py, test_logger.py, test_callbacks.py). Helpers: ``test_conformance.py``."""
+progress bar (after SB3's tests/test_tensorboard.py, test_logger.py, test_callbacks.py). The tiny variants and
+helpers: fixtures of ``conftest.py``."""
 
 from __future__ import annotations
 
@@ -16,26 +17,18 @@ from stable_baselines3.common.callbacks import (
     StopTrainingOnMaxEpisodes,
 )
 from stable_baselines3.common.callbacks import ProgressBarCallback as SB3ProgressBarCallback
-from test_conformance import (
-    ALGOS,
-    EPISODE,
-    OFF_POLICY,
-    algo_class,
-    make_env,
-    make_model,
-)
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
 
 # ----- logging, callbacks, progress bar (SB3 tests/test_tensorboard.py, test_callbacks.py) -----------------------------
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_tensorboard(tmp_path: pathlib.Path, name: str, episode_steps, make_model) -> None:
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     model = make_model(name, tensorboard_log=str(tmp_path))
-    model.learn(3 * EPISODE, log_interval=1)
+    model.learn(3 * episode_steps, log_interval=1)
     class_name = type(model).__name__
     run_dirs = [p for p in tmp_path.iterdir() if p.is_dir()]
     assert [p.name for p in run_dirs] == [f"{class_name}_1"], "tb_log_name must default to the class name"
@@ -48,18 +41,18 @@ def test_tensorboard(tmp_path: pathlib.Path, name: str) -> None:
     assert "time/fps" in tags, tags
     assert any(tag.startswith("rollout/") for tag in tags), tags
 
-    model.learn(EPISODE, reset_num_timesteps=False, log_interval=1)  # continues the same run
+    model.learn(episode_steps, reset_num_timesteps=False, log_interval=1)  # continues the same run
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_custom_logger(tmp_path: pathlib.Path, name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_custom_logger(tmp_path: pathlib.Path, name: str, episode_steps, make_model) -> None:
     """A logger set with ``set_logger`` is kept by ``learn`` and receives the train/ keys (SB3 tests/test_logger.py)."""
     from stable_baselines3.common.logger import configure
 
     model = make_model(name)
     model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(3 * EPISODE, log_interval=1)
+    model.learn(3 * episode_steps, log_interval=1)
     header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
     assert any(key.startswith("train/") for key in header), header
 
@@ -86,36 +79,38 @@ class CountingCallback(BaseCallback):
         self.calls["training_end"] += 1
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_callbacks(tmp_path: pathlib.Path, name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_callbacks(
+    tmp_path: pathlib.Path, name: str, episode_steps, off_policy_names, algo_class, make_env, make_model
+) -> None:
     model = make_model(name)
     counting = CountingCallback()
     checkpoint = CheckpointCallback(
-        save_freq=2 * EPISODE,
+        save_freq=2 * episode_steps,
         save_path=str(tmp_path / "checkpoints"),
-        save_replay_buffer=name in OFF_POLICY,
+        save_replay_buffer=name in off_policy_names,
     )
     evaluation = EvalCallback(
         make_env(),
-        eval_freq=2 * EPISODE,
+        eval_freq=2 * episode_steps,
         n_eval_episodes=1,
         log_path=str(tmp_path / "eval"),
         best_model_save_path=str(tmp_path / "best"),
         warn=False,
     )
-    model.learn(4 * EPISODE, callback=CallbackList([counting, checkpoint, evaluation]))
+    model.learn(4 * episode_steps, callback=CallbackList([counting, checkpoint, evaluation]))
 
-    assert counting.calls["step"] == model.num_timesteps == 4 * EPISODE
+    assert counting.calls["step"] == model.num_timesteps == 4 * episode_steps
     assert counting.calls["training_start"] == counting.calls["training_end"] == 1
     assert counting.calls["rollout_start"] >= 1 and counting.calls["rollout_end"] >= 1
-    for steps in (2 * EPISODE, 4 * EPISODE):
+    for steps in (2 * episode_steps, 4 * episode_steps):
         assert (tmp_path / "checkpoints" / f"rl_model_{steps}_steps.zip").exists()
-    if name in OFF_POLICY:
-        assert (tmp_path / "checkpoints" / f"rl_model_replay_buffer_{2 * EPISODE}_steps.pkl").exists()
-    loaded = algo_class(name).load(tmp_path / "checkpoints" / f"rl_model_{2 * EPISODE}_steps.zip")
-    assert loaded.num_timesteps == 2 * EPISODE
+    if name in off_policy_names:
+        assert (tmp_path / "checkpoints" / f"rl_model_replay_buffer_{2 * episode_steps}_steps.pkl").exists()
+    loaded = algo_class(name).load(tmp_path / "checkpoints" / f"rl_model_{2 * episode_steps}_steps.zip")
+    assert loaded.num_timesteps == 2 * episode_steps
     evaluations = np.load(tmp_path / "eval" / "evaluations.npz")
-    np.testing.assert_array_equal(evaluations["timesteps"], [2 * EPISODE, 4 * EPISODE])
+    np.testing.assert_array_equal(evaluations["timesteps"], [2 * episode_steps, 4 * episode_steps])
     assert (tmp_path / "best" / "best_model.zip").exists()
 
 
@@ -128,24 +123,24 @@ class StopAfter(BaseCallback):
         return self.n_calls < self.limit
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_callback_stops_training(name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_callback_stops_training(name: str, episode_steps, make_model) -> None:
     model = make_model(name)
-    model.learn(10 * EPISODE, callback=StopAfter(EPISODE + 5))
-    assert model.num_timesteps == EPISODE + 5
+    model.learn(10 * episode_steps, callback=StopAfter(episode_steps + 5))
+    assert model.num_timesteps == episode_steps + 5
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_stop_on_max_episodes(name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_stop_on_max_episodes(name: str, episode_steps, make_model) -> None:
     """SB3's StopTrainingOnMaxEpisodes reads ``locals["dones"]``: every training loop must expose it."""
     model = make_model(name)
-    model.learn(10 * EPISODE, callback=StopTrainingOnMaxEpisodes(max_episodes=2))
-    assert model.num_timesteps == 2 * EPISODE
+    model.learn(10 * episode_steps, callback=StopTrainingOnMaxEpisodes(max_episodes=2))
+    assert model.num_timesteps == 2 * episode_steps
 
 
 @pytest.mark.filterwarnings("error::tqdm.TqdmExperimentalWarning")
-@pytest.mark.parametrize("name", ALGOS)
-def test_progress_bar(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.algorithms("all")
+def test_progress_bar(name: str, monkeypatch: pytest.MonkeyPatch, episode_steps, make_model) -> None:
     """SB3's progress bar, without tqdm's "rich is experimental" warning: the bar is created and counts every step."""
     from sb3_denfac.common.callbacks import ProgressBarCallback
 
@@ -158,17 +153,17 @@ def test_progress_bar(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setattr(SB3ProgressBarCallback, "_on_training_end", record_then_close)
     model = make_model(name)
-    model.learn(2 * EPISODE, progress_bar=True)
-    assert model.num_timesteps == 2 * EPISODE
-    assert bars == [(2 * EPISODE, 2 * EPISODE)]
+    model.learn(2 * episode_steps, progress_bar=True)
+    assert model.num_timesteps == 2 * episode_steps
+    assert bars == [(2 * episode_steps, 2 * episode_steps)]
     assert issubclass(ProgressBarCallback, SB3ProgressBarCallback)
 
 
-def test_progress_bar_counts_episodes_when_budgeted_in_episodes() -> None:
+def test_progress_bar_counts_episodes_when_budgeted_in_episodes(episode_steps, make_model) -> None:
     """Episodes that end early (CartPole failures) still fill a bar budgeted in episodes."""
     from sb3_denfac.common.callbacks import ProgressBarCallback
 
-    horizon = 5 * EPISODE
+    horizon = 5 * episode_steps
     env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, random_start=True)
     model = make_model("denfac", env=env, buffer_size=4 * horizon, seed=0)
     bar = ProgressBarCallback(max_episodes=3)

@@ -1,6 +1,6 @@
 """SB3 plugin contract, part 3: spaces and normalisation (float64 and multi-dimensional Box actions, discrete observations,
-VecNormalize, env ids, true terminations; after SB3's tests/test_spaces.py, test_vec_normalize.py). Helpers:
-``test_conformance.py``."""
+VecNormalize, env ids, true terminations; after SB3's tests/test_spaces.py, test_vec_normalize.py). The tiny variants
+and helpers: fixtures of ``conftest.py``."""
 
 from __future__ import annotations
 
@@ -13,15 +13,6 @@ import pytest
 from gymnasium import spaces
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-from test_conformance import (
-    ALGOS,
-    EPISODE,
-    OFF_POLICY,
-    algo_class,
-    make_env,
-    make_model,
-    sample_observations,
-)
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
 
@@ -46,12 +37,12 @@ class Float64ActionEnv(gym.Env):
 
 
 @pytest.mark.parametrize("obs_dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("name", ALGOS)
-def test_float64_action_space(name: str, obs_dtype: type) -> None:
+@pytest.mark.algorithms("all")
+def test_float64_action_space(name: str, obs_dtype: type, episode_steps, make_model) -> None:
     """Box float64 actions work like float32 ones: actions keep the space's dtype and bounds."""
-    env = gym.wrappers.TimeLimit(Float64ActionEnv(obs_dtype), max_episode_steps=EPISODE)
+    env = gym.wrappers.TimeLimit(Float64ActionEnv(obs_dtype), max_episode_steps=episode_steps)
     model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
+    model.learn(2 * episode_steps)
     observation, _ = env.reset(seed=0)
     for deterministic in (True, False):
         action, _ = model.predict(observation, deterministic=deterministic)
@@ -74,13 +65,13 @@ class SpacesEnv(gym.Env):
         return self.observation_space.sample(), 0.0, False, False, {}
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_multidimensional_action_space(name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_multidimensional_action_space(name: str, episode_steps, make_model) -> None:
     """A Box action of shape (2, 2) works as in SB3 (tests/test_spaces.py): actions keep the space's shape."""
     box = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
-    env = gym.wrappers.TimeLimit(SpacesEnv(box, spaces.Box(-2.0, 2.0, shape=(2, 2), dtype=np.float32)), EPISODE)
+    env = gym.wrappers.TimeLimit(SpacesEnv(box, spaces.Box(-2.0, 2.0, shape=(2, 2), dtype=np.float32)), episode_steps)
     model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
+    model.learn(2 * episode_steps)
     for deterministic in (True, False):
         action, _ = model.predict(box.sample(), deterministic=deterministic)
         assert action.shape == (2, 2) and env.action_space.contains(action)
@@ -91,13 +82,15 @@ def test_multidimensional_action_space(name: str) -> None:
     [spaces.Discrete(5), spaces.MultiDiscrete([4, 3]), spaces.MultiBinary(8), spaces.MultiBinary((3, 2))],
     ids=str,
 )
-@pytest.mark.parametrize("name", ALGOS)
-def test_discrete_observation_spaces(name: str, observation_space: spaces.Space) -> None:
+@pytest.mark.algorithms("all")
+def test_discrete_observation_spaces(
+    name: str, observation_space: spaces.Space, episode_steps, make_model, sample_observations
+) -> None:
     """Discrete-like observations are one-hot encoded by SB3's preprocessing and work with every algorithm (SB3's
     test_identity_spaces spaces)."""
-    env = gym.wrappers.TimeLimit(SpacesEnv(observation_space, spaces.Box(-1.0, 1.0, shape=(1,))), EPISODE)
+    env = gym.wrappers.TimeLimit(SpacesEnv(observation_space, spaces.Box(-1.0, 1.0, shape=(1,))), episode_steps)
     model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
+    model.learn(2 * episode_steps)
     observations = sample_observations(observation_space, n=3)
     for deterministic in (True, False):
         action, _ = model.predict(observations[0], deterministic=deterministic)
@@ -105,13 +98,13 @@ def test_discrete_observation_spaces(name: str, observation_space: spaces.Space)
         assert model.predict(observations, deterministic=deterministic)[0].shape == (3, 1)
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_vec_normalize(tmp_path: pathlib.Path, name: str, episode_steps, algo_class, make_env, make_model) -> None:
     env = VecNormalize(DummyVecEnv([make_env]), gamma=0.9, norm_obs=True, norm_reward=True)
     model = make_model(name, env=env)
-    model.learn(2 * EPISODE)
+    model.learn(2 * episode_steps)
     assert model.get_vec_normalize_env() is env
-    assert env.obs_rms.count > 2 * EPISODE
+    assert env.obs_rms.count > 2 * episode_steps
     if isinstance(model, OffPolicyAlgorithm):
         # The replay buffer keeps the original observations (Pendulum: cos^2 + sin^2 = 1), normalised at sampling.
         observations = model.replay_buffer.observations[: model.replay_buffer.size(), 0]
@@ -121,15 +114,15 @@ def test_vec_normalize(tmp_path: pathlib.Path, name: str) -> None:
     loaded_env = VecNormalize.load(str(tmp_path / "vec_normalize.pkl"), DummyVecEnv([make_env]))
     model = algo_class(name).load(tmp_path / "model.zip", env=loaded_env)
     assert model.get_vec_normalize_env() is loaded_env
-    model.learn(EPISODE, reset_num_timesteps=False)
-    assert model.num_timesteps == 3 * EPISODE
+    model.learn(episode_steps, reset_num_timesteps=False)
+    assert model.num_timesteps == 3 * episode_steps
 
 
 # ----- env ids and true terminations ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_env_id_string(name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_env_id_string(name: str, make_model) -> None:
     """An env id is made by SB3 (Pendulum-v1: 200-step episodes)."""
     overrides = dict(buffer_size=200) if name.startswith("denfac") else {}
     model = make_model(name, env="Pendulum-v1", **overrides)
@@ -138,13 +131,13 @@ def test_env_id_string(name: str) -> None:
     assert model.get_env().get_attr("spec")[0].id == "Pendulum-v1"
 
 
-@pytest.mark.parametrize("name", ALGOS)
-def test_true_terminations(name: str) -> None:
+@pytest.mark.algorithms("all")
+def test_true_terminations(name: str, episode_steps, off_policy_names, make_model) -> None:
     """The paper's CartPole ends early on failure: training runs through terminations and, off-policy, the buffer tells
     failures (dones without timeout) from time limits (timeouts)."""
-    horizon = 5 * EPISODE  # a random start fails in about 50 steps
+    horizon = 5 * episode_steps  # a random start fails in about 50 steps
     env = gym.make("sb3_denfac/ContinuousCartPole-v0", max_episode_steps=horizon, episode_length=horizon, random_start=True)
-    overrides = dict(buffer_size=4 * horizon) if name in OFF_POLICY else {}
+    overrides = dict(buffer_size=4 * horizon) if name in off_policy_names else {}
     model = make_model(name, env=env, seed=0, **overrides)
     model.learn(2 * horizon)
     assert model.num_timesteps >= 2 * horizon
@@ -164,12 +157,12 @@ PAPER_ENVS = ["sb3_denfac/ContinuousAcrobot-v0", "sb3_denfac/ContinuousCartPole-
 
 
 @pytest.mark.parametrize("env_id", PAPER_ENVS)
-@pytest.mark.parametrize("name", ALGOS)
-def test_paper_envs(name: str, env_id: str) -> None:
+@pytest.mark.algorithms("all")
+def test_paper_envs(name: str, env_id: str, episode_steps, make_model) -> None:
     """Every algorithm runs on every paper environment (short episodes)."""
-    env = gym.make(env_id, max_episode_steps=EPISODE, episode_length=EPISODE)
+    env = gym.make(env_id, max_episode_steps=episode_steps, episode_length=episode_steps)
     model = make_model(name, env=env, seed=0)
-    model.learn(2 * EPISODE)
+    model.learn(2 * episode_steps)
     observation, _ = env.reset(seed=1)
     for deterministic in (True, False):
         action, _ = model.predict(observation, deterministic=deterministic)

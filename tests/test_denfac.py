@@ -9,7 +9,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from gymnasium import spaces
 from scipy import stats
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -19,28 +18,6 @@ from sb3_denfac.common.truncated_normal import clamp_mean
 from sb3_denfac.denfac import DENFAC, DENFACReplayBuffer
 from sb3_denfac.denfac.presets import paper
 from sb3_denfac.denfac.updaters import AutogradUpdater
-
-
-class TargetActionEnv(gym.Env):
-    """Bandit-like episodes of 10 steps: obs ~ U(-1, 1)^2, reward -(a - 0.6)^2, gamma irrelevant (time limit)."""
-
-    def __init__(self, low: float = -1.0, high: float = 1.0, episode_length: int = 10):
-        self.observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self.action_space = spaces.Box(low, high, (1,), np.float32)
-        self.target = low + 0.8 * (high - low)  # 0.6 in the scaled space
-        self.episode_length = episode_length
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.t = 0
-        return self.np_random.uniform(-1, 1, 2).astype(np.float32), {}
-
-    def step(self, action):
-        self.t += 1
-        scaled = 2 * (float(action[0]) - self.action_space.low[0]) / (self.action_space.high[0] - self.action_space.low[0]) - 1
-        reward = -((scaled - 0.6) ** 2)
-        truncated = self.t >= self.episode_length
-        return self.np_random.uniform(-1, 1, 2).astype(np.float32), reward, False, truncated, {}
 
 
 def test_buffer_stores_behaviour_means_and_actions_in_bounds(make_denfac):
@@ -138,8 +115,8 @@ def test_timeouts_bootstrap_or_not(make_denfac):
     th.testing.assert_close(model._last_update_stats["q_targets"][timeout], data.rewards[timeout])
 
 
-def test_minibatch_and_box_bounds(make_denfac):
-    env = TargetActionEnv(low=-3.0, high=5.0)
+def test_minibatch_and_box_bounds(make_denfac, target_action_env):
+    env = target_action_env(low=-3.0, high=5.0)
     model = make_denfac(env, batch_size=16, buffer_size=50).learn(40)
     obs = np.stack([env.observation_space.sample() for _ in range(32)])
     actions, _ = model.predict(obs, deterministic=True)
@@ -198,9 +175,9 @@ def test_errors():
             DENFAC("MlpPolicy", "Pendulum-v1", **kwargs)
 
 
-def test_learns_target_action():
+def test_learns_target_action(target_action_env):
     """The deterministic actor must move from ~0 to the rewarded action 0.6 (scaled); fails if updates are broken."""
-    env = TargetActionEnv()
+    env = target_action_env()
     model = DENFAC(
         "MlpPolicy",
         env,
@@ -224,10 +201,10 @@ def test_learns_target_action():
     assert start > 0.4 and end < 0.15, (start, end)
 
 
-def test_default_configuration_learns_target_action():
+def test_default_configuration_learns_target_action(target_action_env):
     """DENFAC("MlpPolicy", env) with its defaults only (but fewer steps per update) moves the actor to the rewarded
     action: mini-batches, a kept actor and critic, no weights, no batch norm."""
-    env = TargetActionEnv()
+    env = target_action_env()
     model = DENFAC("MlpPolicy", env, gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
     assert model.batch_size == 256 and not model.reset_actor and model.weighting == "none"
     assert not model.policy.actor.batch_norm and model.policy.net_arch == {"pi": [64, 64], "qf": [64, 64]}
@@ -238,18 +215,18 @@ def test_default_configuration_learns_target_action():
     assert end < 0.1 and end < start / 2, (start, end)
 
 
-class OneStepFirstEpisodeEnv(TargetActionEnv):
-    """The first episode ends after one step, later ones after ten."""
-
-    def reset(self, *, seed=None, options=None):
-        self.episode_length = 1 if not hasattr(self, "_started") else 10
-        self._started = True
-        return super().reset(seed=seed, options=options)
-
-
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
-def test_one_transition_buffer_waits_for_the_next_episode(make_denfac, update_path):
+def test_one_transition_buffer_waits_for_the_next_episode(make_denfac, update_path, target_action_env):
     """Batch norm has no statistics for one sample: after a one-step first episode the update waits (no crash)."""
+
+    class OneStepFirstEpisodeEnv(target_action_env):
+        """The first episode ends after one step, later ones after ten."""
+
+        def reset(self, *, seed=None, options=None):
+            self.episode_length = 1 if not hasattr(self, "_started") else 10
+            self._started = True
+            return super().reset(seed=seed, options=options)
+
     model = make_denfac(OneStepFirstEpisodeEnv(), update_path=update_path)
     model.learn(1)
     assert model.replay_buffer.size() == 1 and model._n_updates == 0

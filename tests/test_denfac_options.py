@@ -8,7 +8,6 @@ import copy
 import numpy as np
 import pytest
 import torch as th
-from test_denfac import TargetActionEnv
 
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.fast import FastUpdater
@@ -20,8 +19,14 @@ OPTIONS = [dict(prioritized="critic"), dict(prioritized="both"), dict(actor_prox
 AUTOGRAD_ONLY = OPTIONS[:2]  # the fast updater implements the proximal actor too
 
 
-def small_model(**kwargs) -> DENFAC:
-    return DENFAC("MlpPolicy", TargetActionEnv(), **{**SMALL, **kwargs})
+@pytest.fixture
+def small_model(target_action_env):
+    """``small_model(**kwargs)``: DENFAC with :data:`SMALL` settings on the target-action env."""
+
+    def make(**kwargs) -> DENFAC:
+        return DENFAC("MlpPolicy", target_action_env(), **{**SMALL, **kwargs})
+
+    return make
 
 
 # ----- prioritised sampling --------------------------------------------------------------------------------------------
@@ -62,7 +67,7 @@ def test_importance_weights_are_in_0_1_with_max_1():
     th.testing.assert_close(uniform.weights, th.ones(500, 1))
 
 
-def test_updater_sets_priorities_from_its_eval_mode_critic():
+def test_updater_sets_priorities_from_its_eval_mode_critic(small_model):
     """delta = q - Q_{k-1}(s, a) with the updater's critic; "critic" draws the critic's batches from P, not the
     actor's; "none" draws uniformly without weights (the library's uniform batches)."""
     model = small_model(prioritized="critic", batch_size=16).learn(20)
@@ -86,7 +91,7 @@ def test_updater_sets_priorities_from_its_eval_mode_critic():
     assert w is None and len(set(idx.tolist())) == 16  # a uniform draw without replacement, as before
 
 
-def test_prioritised_critic_loss_uses_the_weights(monkeypatch):
+def test_prioritised_critic_loss_uses_the_weights(monkeypatch, small_model):
     """The critic minimises 1/B sum w_i c_i (Q - q)^2 on the prioritised batch."""
     model = small_model(prioritized="critic", batch_size=8, critic_steps=1).learn(20)
     updater = model._make_updater()
@@ -127,7 +132,7 @@ def test_proximal_loss_gradient():
     th.testing.assert_close(pi2.grad, -inv / inv.norm(dim=1).mean() / 5)
 
 
-def actor_change(**kwargs) -> float:
+def actor_change(small_model, **kwargs) -> float:
     """Mean |pi(s) - pi_old(s)| over fixed states after one update (the first episode), same seed."""
     model = small_model(**kwargs)
     obs = np.stack([model.env.observation_space.sample() for _ in range(64)])
@@ -137,11 +142,11 @@ def actor_change(**kwargs) -> float:
     return float(np.abs(model.predict(obs, deterministic=True)[0] - before).mean())
 
 
-def test_huge_proximal_coefficient_keeps_the_actor():
-    free = actor_change(actor_proximal=0.0, update_path="plain", actor_steps=25, actor_learning_rate=0.01)
-    held = actor_change(actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01)
+def test_huge_proximal_coefficient_keeps_the_actor(small_model):
+    free = actor_change(small_model, actor_proximal=0.0, update_path="plain", actor_steps=25, actor_learning_rate=0.01)
+    held = actor_change(small_model, actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01)
     assert free > 0.05 and held < 0.1 * free, (free, held)
-    held_fast = actor_change(actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01, update_path="fast")
+    held_fast = actor_change(small_model, actor_proximal=1e4, actor_steps=25, actor_learning_rate=0.01, update_path="fast")
     assert held_fast < 0.1 * free, (free, held_fast)
     # the old actor is a frozen copy made when the updater is made: the policy's actor is not it
     model = small_model(actor_proximal=1.0, update_path="plain")
@@ -160,7 +165,7 @@ def test_huge_proximal_coefficient_keeps_the_actor():
 
 # ----- updater choice, validation, save/load ---------------------------------------------------------------------------
 @pytest.mark.parametrize("option", AUTOGRAD_ONLY, ids=lambda o: "prioritized=" + o["prioritized"])
-def test_auto_picks_autograd_and_fast_refuses(option):
+def test_auto_picks_autograd_and_fast_refuses(option, small_model):
     assert isinstance(small_model(batch_size=16)._make_updater(), FastUpdater)  # default: fast
     assert isinstance(small_model(batch_size=16, **option)._make_updater(), AutogradUpdater)
     name = next(iter(option))
@@ -172,12 +177,12 @@ def test_auto_picks_autograd_and_fast_refuses(option):
         model._make_updater()
 
 
-def test_auto_picks_fast_for_the_proximal_actor():
+def test_auto_picks_fast_for_the_proximal_actor(small_model):
     assert isinstance(small_model(batch_size=16, actor_proximal=1.0)._make_updater(), FastUpdater)
     assert isinstance(small_model(actor_proximal=1.0, update_path="plain")._make_updater(), AutogradUpdater)
 
 
-def test_invalid_options():
+def test_invalid_options(small_model):
     for kwargs, match in [
         (dict(prioritized="td"), "prioritized must be one of"),
         (dict(prioritized="critic", batch_size=None), "prioritized='critic' .* needs an int batch_size"),
@@ -191,17 +196,17 @@ def test_invalid_options():
             small_model(**kwargs)
 
 
-def test_defaults_are_off():
+def test_defaults_are_off(small_model):
     model = small_model()
     assert (model.prioritized, model.actor_proximal) == ("none", 0.0)
     assert (model.priority_alpha, model.priority_beta, model.priority_eps) == (0.6, 0.4, 1e-3)
 
 
-def test_save_load_keeps_the_options(tmp_path):
+def test_save_load_keeps_the_options(tmp_path, target_action_env, small_model):
     kwargs = dict(prioritized="both", priority_alpha=0.7, priority_beta=0.5, priority_eps=0.01, actor_proximal=2.0)
     model = small_model(batch_size=16, **kwargs).learn(20)
     model.save(tmp_path / "model.zip")
-    loaded = DENFAC.load(tmp_path / "model.zip", env=TargetActionEnv())
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert {key: getattr(loaded, key) for key in kwargs} == kwargs
     settings = loaded._make_updater().settings
     assert (settings.prioritized, settings.actor_proximal) == ("both", 2.0)
@@ -211,10 +216,10 @@ def test_save_load_keeps_the_options(tmp_path):
 
 # ----- learning tests ----------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("option", [dict(prioritized="critic"), dict(actor_proximal=1.0)], ids=["per-critic", "proximal"])
-def test_option_learns_target_action(option):
+def test_option_learns_target_action(option, target_action_env):
     """The default configuration with the option on (fewer steps per update) moves the actor to the rewarded action,
     as test_default_configuration_learns_target_action does without it."""
-    env = TargetActionEnv()
+    env = target_action_env()
     model = DENFAC("MlpPolicy", env, **SMALL, **option)
     obs = np.stack([env.observation_space.sample() for _ in range(64)])
     start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
