@@ -107,35 +107,19 @@ CLASS_PATHS = {
     "cmaes": "sb3_denfac.cmaes:CMAES",
 }
 #: Tiny configurations: every update is a handful of gradient steps on networks of a few units.
+_TINY_DENFAC = dict(
+    buffer_size=5 * EPISODE,
+    n_fitted_iterations=1,
+    critic_steps=2,
+    actor_steps=2,
+    policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
+)
+_TINY_DDPG = dict(buffer_size=5 * EPISODE, learning_starts=10, batch_size=8, policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])))
 TINY_KWARGS: dict[str, dict[str, Any]] = {
-    "denfac": dict(
-        buffer_size=5 * EPISODE,
-        n_fitted_iterations=1,
-        critic_steps=2,
-        actor_steps=2,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
-    ),
-    "denfac_plain": dict(
-        update_path="plain",
-        buffer_size=5 * EPISODE,
-        n_fitted_iterations=1,
-        critic_steps=2,
-        actor_steps=2,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
-    ),
-    "ddpg": dict(
-        buffer_size=5 * EPISODE,
-        learning_starts=10,
-        batch_size=8,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
-    ),
-    "ddpg_ig": dict(
-        inverting_gradients=True,
-        buffer_size=5 * EPISODE,
-        learning_starts=10,
-        batch_size=8,
-        policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])),
-    ),
+    "denfac": _TINY_DENFAC,
+    "denfac_plain": {**_TINY_DENFAC, "update_path": "plain"},
+    "ddpg": _TINY_DDPG,
+    "ddpg_ig": {**_TINY_DDPG, "inverting_gradients": True},
     "nfac": dict(
         n_fitted_iterations=1,
         critic_steps=2,
@@ -233,40 +217,24 @@ def tiny_kwargs() -> dict[str, dict[str, Any]]:
     return deepcopy(TINY_KWARGS)
 
 
-@pytest.fixture(name="algo_class")
-def algo_class_fixture() -> Any:
-    """``algo_class(name)``: the class of a variant."""
-    return algo_class
+def _helper_fixture(helper: Any) -> Any:
+    """A fixture named and documented as ``helper`` that gives the function itself."""
+
+    def fixture() -> Any:
+        return helper
+
+    fixture.__doc__ = helper.__doc__
+    return pytest.fixture(name=helper.__name__)(fixture)
 
 
-@pytest.fixture(name="make_env")
-def make_env_fixture() -> Any:
-    """``make_env(episode=EPISODE)``: Pendulum-v1 cut to ``episode`` steps."""
-    return make_env
-
-
-@pytest.fixture(name="make_model")
-def make_model_fixture() -> Any:
-    """``make_model(name, env=None, **overrides)``: a tiny model of a variant."""
-    return make_model
-
-
-@pytest.fixture(name="sample_observations")
-def sample_observations_fixture() -> Any:
-    """``sample_observations(space, n=10, seed=0)``: a seeded batch of observations."""
-    return sample_observations
-
-
-@pytest.fixture(name="batch_norm_buffers")
-def batch_norm_buffers_fixture() -> Any:
-    """``batch_norm_buffers(module)``: copies of every batch-norm running mean and variance."""
-    return batch_norm_buffers
-
-
-@pytest.fixture(name="assert_same_parameters")
-def assert_same_parameters_fixture() -> Any:
-    """``assert_same_parameters(params_a, params_b)``: same networks, batch-norm buffers and optimizer states."""
-    return assert_same_parameters
+#: ``algo_class(name)``, ``make_env(episode)``, ``make_model(name, env=None, **overrides)``,
+#: ``sample_observations(space, n, seed)``, ``batch_norm_buffers(module)``, ``assert_same_parameters(a, b)``.
+algo_class_fixture = _helper_fixture(algo_class)
+make_env_fixture = _helper_fixture(make_env)
+make_model_fixture = _helper_fixture(make_model)
+sample_observations_fixture = _helper_fixture(sample_observations)
+batch_norm_buffers_fixture = _helper_fixture(batch_norm_buffers)
+assert_same_parameters_fixture = _helper_fixture(assert_same_parameters)
 
 
 # ----- a bandit-like env (DENFAC tests) ----------------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pathlib
 import zipfile
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -114,9 +115,20 @@ def test_foreign_replay_buffer(tmp_path: pathlib.Path, name: str, episode_steps,
 
 
 # ----- nothing lost: save and resume ----------------------------------------------------------------------------------
+def _saved_and_loaded(model: Any, folder: pathlib.Path, env: gym.Env, with_replay_buffer: bool) -> Any:
+    """``model`` saved to ``folder`` (and its replay buffer) and loaded back on ``env``."""
+    model.save(folder / "model.zip")
+    if with_replay_buffer:
+        model.save_replay_buffer(folder / "buffer.pkl")
+    loaded = type(model).load(folder / "model.zip", env=env)
+    if with_replay_buffer:
+        loaded.load_replay_buffer(folder / "buffer.pkl")
+    return loaded
+
+
 @pytest.mark.algorithms("all")
 def test_save_and_resume_loses_nothing(
-    tmp_path: pathlib.Path, name: str, episode_steps, off_policy_names, algo_class, make_env, make_model
+    tmp_path: pathlib.Path, name: str, episode_steps, off_policy_names, make_env, make_model
 ) -> None:
     """learn; save (+ replay buffer); load; learn(reset_num_timesteps=False) ends where an uninterrupted run ends,
     with the same number of updates and episodes and, off-policy, the same buffer content up to the interruption."""
@@ -127,12 +139,7 @@ def test_save_and_resume_loses_nothing(
 
     interrupted = make_model(name, seed=1)
     interrupted.learn(half)
-    interrupted.save(tmp_path / "model.zip")
-    if off_policy:
-        interrupted.save_replay_buffer(tmp_path / "buffer.pkl")
-    resumed = algo_class(name).load(tmp_path / "model.zip", env=make_env())
-    if off_policy:
-        resumed.load_replay_buffer(tmp_path / "buffer.pkl")
+    resumed = _saved_and_loaded(interrupted, tmp_path, make_env(), with_replay_buffer=off_policy)
     resumed.learn(total - half, reset_num_timesteps=False)
 
     assert resumed.num_timesteps == uninterrupted.num_timesteps == total
@@ -176,7 +183,6 @@ def test_resume_is_exact(
     name: str,
     episode_steps,
     off_policy_names,
-    algo_class,
     assert_same_parameters,
     make_env,
     make_model,
@@ -186,12 +192,7 @@ def test_resume_is_exact(
     off_policy = name in off_policy_names
     model = make_model(name, seed=2)
     model.learn(2 * episode_steps)
-    model.save(tmp_path / "model.zip")
-    if off_policy:
-        model.save_replay_buffer(tmp_path / "buffer.pkl")
-    loaded = algo_class(name).load(tmp_path / "model.zip", env=make_env())
-    if off_policy:
-        loaded.load_replay_buffer(tmp_path / "buffer.pkl")
+    loaded = _saved_and_loaded(model, tmp_path, make_env(), with_replay_buffer=off_policy)
     model.set_env(make_env(), force_reset=True)
     for copy in (model, loaded):
         copy.set_random_seed(7)
