@@ -114,7 +114,9 @@ _TINY_DENFAC = dict(
     actor_steps=2,
     policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]), batch_norm=True),
 )
-_TINY_DDPG = dict(buffer_size=5 * EPISODE, learning_starts=10, batch_size=8, policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4])))
+_TINY_DDPG = dict(
+    buffer_size=5 * EPISODE, learning_starts=10, batch_size=8, policy_kwargs=dict(net_arch=dict(pi=[4], qf=[8, 4]))
+)
 TINY_KWARGS: dict[str, dict[str, Any]] = {
     "denfac": _TINY_DENFAC,
     "denfac_plain": {**_TINY_DENFAC, "update_path": "plain"},
