@@ -233,7 +233,7 @@ def test_finite_inputs_mixin_catches_nan_actions(make_checked_td3, make_env) -> 
 def test_learn_checks_mixin(tmp_path: pathlib.Path, checked_td3_class, make_checked_td3, make_env) -> None:
     make_checked_td3(make_env()).save(tmp_path / "model.zip")
     model = checked_td3_class.load(tmp_path / "model.zip")
-    with pytest.raises(ValueError, match=r"checked_td3_class.learn\(\) needs an environment"):
+    with pytest.raises(ValueError, match=r"CheckedTD3.learn\(\) needs an environment"):
         model.learn(10)
 
 

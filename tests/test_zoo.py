@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import optuna
 import pytest
 import sqlalchemy
@@ -239,6 +240,34 @@ def test_every_yaml_entry_builds_a_model(path: Path, tmp_path: Path) -> None:
         model, _ = manager.setup_experiment()
         assert isinstance(model, zoo.algorithm_class(path.stem))
         model.get_env().close()
+
+
+@pytest.mark.parametrize("algo", ["denfac", "td3"])  # td3: the zoo's noise_type / noise_std too
+def test_make_model_builds_what_the_zoo_builds(algo: str, tmp_path: Path) -> None:
+    """make_model (quickstart, Figure 3 benchmark) and the zoo's own setup_experiment give the same model from an entry."""
+    manager = ExperimentManager(
+        argparse.Namespace(), algo, ENV, str(tmp_path), eval_freq=-1, config=str(zoo.default_config_path(algo)), seed=3
+    )
+    manager.device, manager.verbose = "cpu", 0
+    zoo_model, _ = manager.setup_experiment()
+    ours = zoo.make_model(algo, ENV, zoo.load_hyperparams(algo, ENV), seed=3, device="cpu")
+    assert type(ours) is type(zoo_model) and ours.policy_kwargs == zoo_model.policy_kwargs
+    assert (ours.gamma, ours.buffer_size, ours.batch_size) == (zoo_model.gamma, zoo_model.buffer_size, zoo_model.batch_size)
+    assert type(ours.action_noise) is type(zoo_model.action_noise)
+    if algo == "td3":
+        np.testing.assert_array_equal(ours.action_noise._sigma, zoo_model.action_noise._sigma)
+    for (key, value), other in zip(ours.policy.state_dict().items(), zoo_model.policy.state_dict().values(), strict=True):
+        assert th.equal(value, other), key
+    zoo_model.get_env().close()
+    ours.get_env().close()
+
+
+def test_make_model_names_a_missing_zoo_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    """make_model uses two private ExperimentManager steps: an rl_zoo3 without one gets an error naming it."""
+    entry = zoo.load_hyperparams("cmaes", ENV)
+    monkeypatch.delattr(ExperimentManager, "_preprocess_action_noise")
+    with pytest.raises(zoo.ZooConfigError, match=r"rl_zoo3 .* ExperimentManager\._preprocess_action_noise"):
+        zoo.make_model("cmaes", ENV, entry)
 
 
 def test_paper_figure5_values() -> None:
