@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sb3_denfac.common.performance import best_so_far
+from sb3_denfac.common.performance import best_so_far, fall_back_fraction
 
 RESULTS = Path(__file__).resolve().parent / "results" / "denfac_ablation"
 # return threshold per env for "episode of first return above"
@@ -48,20 +48,17 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
         best = best_so_far(score, lower_is_better=False)  # score: higher is better on every env (Acrobot: -steps)
         n = len(ret)
         first = int(reached[0]) + 1 if len(reached) else np.nan
-        # stability: fraction of episodes after the first success falling below half the best (returns shifted by
-        # the env's worst observed episode so that "half" is meaningful for negative returns)
-        stab = np.nan
-        if len(reached):
-            lo = score.min()
-            after = score[reached[0] + 1 :]
-            if len(after):
-                stab = float(np.mean((after - lo) < 0.5 * (best[-1] - lo)))
+        # stability (one definition, sb3_denfac.common.performance); halfway from the run's worst episode
+        hit = np.zeros(len(score), bool)
+        hit[reached] = True
+        stab = fall_back_fraction(score, False, hit)
         row = dict(
             config=r["config"]
             if r["episodes"] == DEFAULT_EPISODES.get(env, r["episodes"]) or upto
             else f"{r['config']} ({r['episodes']} ep)",
             env=env,
             seed=r["seed"],
+            budget=r["episodes"],
             episodes=n,
             last10=float(score[-10:].mean()),
             best=float(best[-1]),
@@ -86,7 +83,10 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             )
         for d in r["diagnostics"]:
             diags.append(dict(config=r["config"], env=env, seed=r["seed"], **d))
-    return pd.DataFrame(runs), pd.DataFrame(eps), pd.DataFrame(diags)
+    runs_df = pd.DataFrame(runs)
+    if upto is not None and not runs_df.empty:  # one run per (config, env, seed): the one made for the shortest budget
+        runs_df = runs_df.sort_values("budget").drop_duplicates(["config", "env", "seed"]).sort_index()
+    return runs_df, pd.DataFrame(eps), pd.DataFrame(diags)
 
 
 def q(x: pd.Series) -> str:
@@ -103,6 +103,18 @@ def to_markdown(df: pd.DataFrame) -> str:
     for _, r in df.iterrows():
         lines.append("| " + " | ".join(str(r[c]) for c in cols) + " |")
     return "\n".join(lines)
+
+
+def full_budget_options(runs: pd.DataFrame) -> list[str]:
+    """Library default (0.2, ``default``) against the proximal actor (0.3's default) at each env's full budget."""
+    out = []
+    for env, budget in (("pendulum", 40), ("halfcheetah", 100), ("cartpole", 100), ("invpendulum", 100), ("acrobot", 100)):
+        suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
+        configs = [f"default{suffix}", f"default+proximal{suffix}"]
+        if runs.config.isin(configs).any() and (runs.env == env).any():
+            out.append(f"### {env}, {budget} episodes\n")
+            out.append(table(runs, env, configs))
+    return out
 
 
 def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str:
@@ -170,6 +182,8 @@ def main() -> int:
     out.append(table(runs, "pendulum", [*options, "good", "proto-per-critic", "proto-proxg1"]))
     out.append("## Library options, HalfCheetahPaper-v0, every run cut to its first 20 episodes\n")
     out.append(table(r20, "halfcheetah", [*options, "good", "proto-per-critic", "proto-proxg1"]))
+    out.append("## The proximal actor at full budgets (`default` = 0.2's default, `default+proximal` = 0.3's)\n")
+    out.extend(full_budget_options(runs))
     (results / "tables.md").write_text("\n".join(out))
     print("\n".join(out))
     return 0

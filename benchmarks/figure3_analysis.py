@@ -24,11 +24,12 @@ import numpy as np
 import pandas as pd
 from figure3_suites import ALGOS, SUITES, Suite, estimated_cost
 
+from sb3_denfac.common.performance import fall_back_fraction
 from sb3_denfac.envs.facts import env_facts
 
 RUN_FIELDS = [
     *("algo", "env", "seed", "episodes", "timesteps", "cpu_time", "eval_cpu_time", "wall_time", "final_best", "last10"),
-    *("final_eval", "episodes_to_threshold", "cpu_per_episode", "trained", "hyperparams_source", "commit"),
+    *("final_eval", "episodes_to_threshold", "fall_back", "cpu_per_episode", "trained", "hyperparams_source", "commit"),
 ]
 
 
@@ -58,6 +59,12 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "last10": float(eps["performance"].tail(10).mean()),
                 "final_eval": float(np.mean(evaluations[-1]["scores"])) if evaluations else np.nan,
                 "episodes_to_threshold": float(hits.iloc[0]) if len(hits) else np.nan,
+                "fall_back": fall_back_fraction(
+                    eps["performance"],
+                    facts.lower_is_better,
+                    eps["performance"].map(facts.reached),
+                    facts.score_range[0] if facts.score_range else None,
+                ),
                 "cpu_per_episode": float(meta.get("cpu_time", np.nan)) / max(len(eps), 1),
                 # A run trained if its model updated at all: more steps than the warm-up, and a second episode.
                 "trained": bool(meta.get("timesteps", 0) > _learning_starts(meta) and len(eps) >= 2),
@@ -87,6 +94,10 @@ def _quartiles(values: pd.Series, digits: int = 1) -> str:
     return f"{med:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
 
 
+def _worst(facts) -> str:
+    return f"{facts.score_range[0]:g}" if facts.score_range else "the run's worst episode"
+
+
 def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
     """One row per algorithm: runs, seeds, and median [Q1, Q3] of each measure, threshold reached, CPU cost."""
     facts = env_facts(env)
@@ -108,6 +119,7 @@ def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
                 )
                 if facts.threshold is not None
                 else "",
+                "fall-back fraction": _quartiles(r["fall_back"], 2) if facts.threshold is not None else "",
                 "CPU s per run": _quartiles(r["cpu_time"], 0),
                 "CPU s per episode": _quartiles(r["cpu_per_episode"], 2),
             }
@@ -183,7 +195,9 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
         lines += [f"## {env} (`{facts.gym_id}`, {facts.measure}, {direction}; {budget} episodes)", ""]
         if facts.threshold is not None:
             op = "<" if facts.lower_is_better else ">="
-            lines += [f"Threshold: best so far {op} {facts.threshold:g} ({facts.threshold_meaning}).", ""]
+            lines += [f"Threshold: best so far {op} {facts.threshold:g} ({facts.threshold_meaning}). Fall-back fraction: "
+                      "of the episodes after the first that reached it, the share below half the best so far (halfway "
+                      f"from {_worst(facts)}).", ""]  # fmt: skip
         lines += [_md(env_table(runs, env)), ""]
     lines += aggregates(runs, envs, out, stem)
     if suite is None or suite.name == "figure3":
