@@ -92,6 +92,7 @@ FAITHFUL: dict[str, Any] = dict(
     sigma=0.05,
     weighting="retrace",
     bootstrap_on_timeout=True,
+    actor_proximal=0.0,
     policy_kwargs=dict(net_arch=dict(pi=[20], qf=[50, 7]), batch_norm=True, init="paper"),
 )
 
@@ -109,6 +110,7 @@ GOOD: dict[str, Any] = dict(
     sigma=0.1,
     weighting="none",
     bootstrap_on_timeout=True,
+    actor_proximal=0.0,  # the 0.2 library default; the 0.3 default is `default+proximal`
     policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]), batch_norm=False, init="default"),
 )
 

@@ -241,6 +241,7 @@ def test_model_saved_by_version_0_1_loads_with_its_own_defaults():
     model = DENFAC.load(data / "denfac_v0.1_pendulum.zip", device="cpu")
     assert model.policy.net_arch == {"pi": [20], "qf": [50, 7]} and model.policy.actor.batch_norm
     assert model.weighting == "retrace" and model.reset_actor and model.batch_size is None
+    assert model.actor_proximal == 0.0  # no proximal actor then (the 0.3 default is 1.0)
     obs = np.load(data / "denfac_v0.1_pendulum_obs.npy")
     np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], np.load(data / "denfac_v0.1_pendulum_actions.npy"))
     model.set_env(gym.make("Pendulum-v1", max_episode_steps=50))

@@ -12,6 +12,7 @@ import torch as th
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.fast import FastUpdater
 from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
+from sb3_denfac.denfac.presets import PAPER
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
 SMALL = dict(gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
@@ -196,9 +197,11 @@ def test_invalid_options(small_model):
             small_model(**kwargs)
 
 
-def test_defaults_are_off(small_model):
+def test_option_defaults(small_model):
+    """Uniform sampling and the proximal actor with lambda = 1 (the 0.3 default); the paper's preset turns it off."""
     model = small_model()
-    assert (model.prioritized, model.actor_proximal) == ("none", 0.0)
+    assert (model.prioritized, model.actor_proximal) == ("none", 1.0)
+    assert small_model(**{k: v for k, v in PAPER.items() if k != "policy_kwargs"}).actor_proximal == 0.0
     assert (model.priority_alpha, model.priority_beta, model.priority_eps) == (0.6, 0.4, 1e-3)
 
 

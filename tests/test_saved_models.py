@@ -52,3 +52,10 @@ def test_v0_2_optimizer_state_and_rates_are_restored(name: str) -> None:
             th.testing.assert_close(state["state"][index]["exp_avg"], moments["exp_avg"])
         assert getattr(model, f"{net}_lr_schedule")(0.5) == pytest.approx(rate)
     assert any(saved[key]["state"] for key in saved if key != "policy"), "the fixture has no Adam state to compare"
+
+
+def test_v0_2_denfac_keeps_the_plain_actor_update() -> None:
+    """0.2 saved no ``actor_proximal`` (the option was off by default then): the model loads with it off, not with
+    0.3's default, and a model saved now keeps the value it was built with."""
+    model = DENFAC.load(DATA / "denfac_v0.2_pendulum.zip", device="cpu")
+    assert model.actor_proximal == 0.0 and DENFAC("MlpPolicy", "Pendulum-v1").actor_proximal == 1.0

@@ -70,7 +70,12 @@ class DENFAC(
     - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam
       (step 1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25
       actor steps per iteration, the actor and the critic kept across iterations and episodes, 64-64 networks without
-      batch norm and PyTorch's initialisation, sigma = 0.1 and no importance weights. Each change from the paper was
+      batch norm and PyTorch's initialisation, sigma = 0.1, no importance weights, and the proximal actor update
+      (``actor_proximal=1.0``): each actor step follows the gradient of eq. (5) normalised to unit mean norm per
+      sample, pulled back towards the actor of the update's start by lambda ||pi(s) - pi_old(s)||^2, so one update
+      moves the actions by about 1/(2 lambda) at most, whatever the reward scale (:mod:`~.options`). Without it, on
+      Half-Cheetah the actor jumps onto the critic's extrapolated optimum, the next episode's data leave the region
+      where the critic was fitted, and the critic diverges. Each change from the paper was
       measured alone, on Pendulum-v1 and Half-Cheetah (``benchmarks/results/denfac_ablation/``); the ones that matter:
       importance weights (with a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor has moved, which throws
       the data away; the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no weight to evaluate pi), the
@@ -131,14 +136,15 @@ class DENFAC(
         default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or
         "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
         ``benchmarks/results/update_cost.md``). Models saved with the removed "compiled" path load with "fast".
-        The two options below are autograd only: "auto" then picks "plain" and "fast" refuses them
+        Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; needs an int ``batch_size``
     :param priority_alpha: alpha in the priorities p_i = (|delta_i| + eps)^alpha, P(i) = p_i / sum p (0: uniform)
     :param priority_beta: beta in the weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0: no correction)
     :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
     :param actor_proximal: lambda of the proximal actor (paper: future work, slower policy change; :mod:`~.options`): the
-        normalised ascent of eq. (5) plus lambda mean ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update
+        normalised ascent of eq. (5) plus lambda mean ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update;
+        1.0 by default, 0.0 for eq. (5) as written (the paper)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -185,7 +191,7 @@ class DENFAC(
         priority_alpha: float = 0.6,
         priority_beta: float = 0.4,
         priority_eps: float = 1e-3,
-        actor_proximal: float = 0.0,
+        actor_proximal: float = 1.0,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -212,6 +218,8 @@ class DENFAC(
         self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
             prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size, update_path
         )
+        if not _init_setup_model:  # SB3's load: saved attributes follow; files of sb3-denfac <= 0.2 have none for
+            self.actor_proximal = 0.0  # the proximal actor, which was off by default then
         super().__init__(
             policy,
             env,

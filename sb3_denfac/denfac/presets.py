@@ -1,11 +1,12 @@
 """DENFAC's two configurations: the general default and the paper's Algorithm 1, one argument set apart.
 
 ``DENFAC("MlpPolicy", env)`` uses the constructor's defaults and :data:`DEFAULT_POLICY_KWARGS`: fitted iterations
-of mini-batch Adam steps on a kept actor and critic, wide networks without batch norm, no importance weights (why:
-the class docstring; measurements: ``benchmarks/results/denfac_ablation/``).
+of mini-batch Adam steps on a kept actor and critic, a proximal actor update, wide networks without batch norm, no
+importance weights (why: the class docstring; measurements: ``benchmarks/results/denfac_ablation/``).
 
 ``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common
-values: full-batch steps, the actor re-initialised at every fitted iteration, Retrace-style weights, batch norm,
+values: full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no
+proximal term), Retrace-style weights, batch norm,
 N(0, 0.01) weights, Adam step 0.1 with beta1 = 0 (the authors' solver), sigma = 0.05. The per-env values of Figure 5
 (D, reset critic, inverting gradients, gamma, actor sizes) are in the zoo YAML entries of the paper's envs.
 """
@@ -29,6 +30,7 @@ PAPER: dict[str, Any] = {
     "reset_actor": True,
     "reset_critic": False,
     "weighting": "retrace",
+    "actor_proximal": 0.0,
     "sigma": 0.05,
     "policy_kwargs": {"net_arch": {"pi": [20], "qf": [50, 7]}, "batch_norm": True, "init": "paper"},
 }
