@@ -1,14 +1,9 @@
-"""DENFAC diagnosis ablations and prototypes (issue #12): named configurations x envs x seeds, resumable.
+"""DENFAC diagnosis ablations and prototypes: named configurations x envs x seeds, resumable.
 
-Every run trains one DENFAC configuration (constructor knobs only, or a prototype subclass defined in
-``denfac_prototypes.py``) for a fixed number of episodes on one env with one torch thread and writes
-``<results>/runs/<config>/<env>/seed_<k>.json`` (per-episode returns, CPU seconds, critic-fit diagnostics).
-A rerun skips runs whose file exists. ``--list`` prints the configurations.
-
-Examples::
-
-    python benchmarks/denfac_ablation.py --configs faithful good --envs pendulum --seeds 0 1 2
-    python benchmarks/denfac_ablation.py --configs good --envs halfcheetah --episodes 30
+Every run trains one DENFAC configuration (constructor knobs, or a prototype subclass of ``denfac_prototypes.py``)
+for a number of episodes on one env with one torch thread and writes ``<results>/runs/<config>/<env>/seed_<k>.json``
+(per-episode returns, CPU seconds, critic-fit diagnostics); a rerun skips runs whose file exists. ``--list`` prints
+the configurations. Example: ``python benchmarks/denfac_ablation.py --configs faithful good --envs pendulum``.
 """
 
 from __future__ import annotations

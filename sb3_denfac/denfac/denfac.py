@@ -70,13 +70,12 @@ class DENFAC(
     - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam
       (step 1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25
       actor steps per iteration, the actor and the critic kept across iterations and episodes, 64-64 networks without
-      batch norm and PyTorch's initialisation, sigma = 0.1, no importance weights, and the proximal actor update
-      (``actor_proximal=1.0``): each actor step follows the gradient of eq. (5) normalised to unit mean norm per
-      sample, pulled back towards the actor of the update's start by lambda ||pi(s) - pi_old(s)||^2, so one update
-      moves the actions by about 1/(2 lambda) at most, whatever the reward scale (:mod:`~.options`). Without it, on
-      Half-Cheetah the actor jumps onto the critic's extrapolated optimum, the next episode's data leave the region
-      where the critic was fitted, and the critic diverges. Each change from the paper was
-      measured alone, on Pendulum-v1 and Half-Cheetah (``benchmarks/results/denfac_ablation/``); the ones that matter:
+      batch norm and PyTorch's initialisation, sigma = 0.1, no importance weights, and the proximal actor
+      (``actor_proximal=1.0``, :mod:`~.options`): the gradient of eq. (5), normalised, pulled back towards the actor
+      of the update's start, so an update moves the actions by about 1/(2 lambda) whatever the reward scale; without
+      it the actor jumps onto the critic's extrapolated optimum on Half-Cheetah, the next data leave the region where
+      the critic was fitted, and the critic diverges. Each change from the paper was measured alone, on Pendulum-v1
+      and Half-Cheetah (``benchmarks/results/denfac_ablation/``); the ones that matter:
       importance weights (with a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor has moved, which throws
       the data away; the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no weight to evaluate pi), the
       N(0, 0.01) initialisation without batch norm (the signal vanishes through the layers), re-initialising the
@@ -88,10 +87,9 @@ class DENFAC(
 
     Implementation choices (documented differences or precisions):
 
-    - Time limits: truncated episodes bootstrap (``bootstrap_on_timeout=True``, SB3 semantics). The paper-era authors'
-      code treated time-limit ends as terminal (fixed by them in 2017): ``bootstrap_on_timeout=False`` reproduces it.
-    - Loss scale: 1/N as in Algorithm 1 (the authors' code uses 1/(2N)); Adam is invariant to a constant loss factor
-      except through ``adam_eps`` and ``max_grad_norm``.
+    - Time limits: truncated episodes bootstrap (SB3 semantics); ``bootstrap_on_timeout=False`` reproduces the
+      paper-era authors' code, which treated them as terminal (fixed by them in 2017).
+    - Loss scale: 1/N as in Algorithm 1 (the authors' code: 1/(2N)); Adam ignores it except via eps and clipping.
     - Target actions pi_{k-1}(s') are clipped to [-1, 1] (the executed policy never leaves the bounds).
     - Batch norm (``policy_kwargs=dict(batch_norm=True)``, the paper's): targets and importance weights use eval mode
       (running statistics); the critic is in eval mode during the actor steps (gradients of the fitted function, no
@@ -102,10 +100,8 @@ class DENFAC(
       slower; their contribution is below float32's resolution).
     - Budget: ``learn(total_timesteps)`` stops at ``total_timesteps``, also inside an episode, and then updates on the
       buffer as it is (the unfinished episode bootstraps); see :mod:`sb3_denfac.common.budget`.
-    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards raise a
-      ValueError, ``load`` refuses corrupted zips and zips or replay buffers of another algorithm, and an action space
-      that is not a Box with finite bounds raises an :class:`~sb3_denfac.common.checks.UnsupportedSpaceError` (a
-      ValueError that is also SB3's AssertionError).
+    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards, corrupted
+      or foreign zips and action spaces other than finite Boxes raise errors that name the problem.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -115,8 +111,7 @@ class DENFAC(
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``
     :param buffer_size: D, size of the FIFO replay buffer (paper: 3000-6000)
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
-    :param batch_size: an int = one uniformly drawn mini-batch of that size per critic/actor step; None = full batch
-        (the whole buffer at every step, paper)
+    :param batch_size: an int = one uniform mini-batch of that size per critic/actor step; None = full batch (paper)
     :param gamma: discount factor gamma
     :param n_fitted_iterations: K, fitted iterations per update (paper: 10)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)
@@ -142,9 +137,8 @@ class DENFAC(
     :param priority_alpha: alpha in the priorities p_i = (|delta_i| + eps)^alpha, P(i) = p_i / sum p (0: uniform)
     :param priority_beta: beta in the weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0: no correction)
     :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
-    :param actor_proximal: lambda of the proximal actor (paper: future work, slower policy change; :mod:`~.options`): the
-        normalised ascent of eq. (5) plus lambda mean ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update;
-        1.0 by default, 0.0 for eq. (5) as written (the paper)
+    :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
+        ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -218,8 +212,8 @@ class DENFAC(
         self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
             prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size, update_path
         )
-        if not _init_setup_model:  # SB3's load: saved attributes follow; files of sb3-denfac <= 0.2 have none for
-            self.actor_proximal = 0.0  # the proximal actor, which was off by default then
+        if not _init_setup_model:  # SB3's load (saved attributes follow): files of <= 0.2 had the proximal actor off
+            self.actor_proximal = 0.0
         super().__init__(
             policy,
             env,
@@ -265,8 +259,7 @@ class DENFAC(
         self.bootstrap_on_timeout = bootstrap_on_timeout
         self.update_path = update_path
         check_holds_one_episode(self.env, self.buffer_size)
-        # Written into policy_kwargs, so a saved model keeps them if the defaults change; ``load`` replaces
-        # policy_kwargs with the saved ones (models of 0.1 saved none: DENFACPolicy's own, the paper's, apply).
+        # In policy_kwargs, so saved models keep them (0.1 saved none: DENFACPolicy's own, the paper's, apply).
         for key, value in DEFAULT_POLICY_KWARGS.items():
             self.policy_kwargs.setdefault(key, copy.deepcopy(value))
         if _init_setup_model:
