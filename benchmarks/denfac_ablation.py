@@ -35,8 +35,7 @@ import gymnasium as gym  # noqa: E402
 from stable_baselines3.common.monitor import Monitor  # noqa: E402
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # noqa: E402
 
-import sb3_denfac  # noqa: E402, F401  (registers the paper envs)
-from sb3_denfac import DENFAC  # noqa: E402
+from sb3_denfac import DENFAC  # noqa: E402  (importing sb3_denfac registers the paper envs)
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback  # noqa: E402
 
 RESULTS = _HERE / "results" / "denfac_ablation"
@@ -195,11 +194,12 @@ def build_configs() -> dict[str, dict[str, Any]]:
         ),
     )
     c["proto-per-critic-D3000"] = merge(
-        GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True, actor_per=False))
+        GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True))
     )
-    # the library options (sb3_denfac/denfac/options.py) on the library default (= GOOD), autograd updater
+    # the library options (options.py) on 0.2's default (= GOOD); default+proximal is 0.3's default
     c["default"] = merge(GOOD)
     c["default+per-critic"] = merge(GOOD, dict(prioritized="critic"))
+    c["default+per-both"] = merge(GOOD, dict(prioritized="both"))
     c["default+proximal"] = merge(GOOD, dict(actor_proximal=1.0))
     return c
 
