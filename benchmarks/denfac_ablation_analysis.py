@@ -177,7 +177,7 @@ def main() -> int:
     r20, _, _ = load(results, upto=20)
     out.append("## Prototypes, HalfCheetahPaper-v0, every run cut to its first 20 episodes\n")
     out.append(table(r20, "halfcheetah", ["good"] + select(r20, "proto", "proto-uniform") + ["good+D3000"]))
-    options = ["default", "default+per-critic", "default+proximal"]  # library options (options.py), this library
+    options = ["default", "default+per-critic", "default+per-both", "default+proximal"]  # library options (options.py)
     out.append("## Library options, Pendulum-v1, 40 episodes ('good' / 'proto-*': the same equations, earlier runs)\n")
     out.append(table(runs, "pendulum", [*options, "good", "proto-per-critic", "proto-proxg1"]))
     out.append("## Library options, HalfCheetahPaper-v0, every run cut to its first 20 episodes\n")
