@@ -40,18 +40,16 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             lengths = np.asarray(r["lengths"][: len(ret)], dtype=float)
             perf = np.where(ret >= 0.999, lengths, 500.0)
             score = -perf
-            reached = np.flatnonzero(perf < 500)
+            hit = perf < 500
         else:
             score = ret
             th_ = THRESH.get(env)
-            reached = np.flatnonzero(ret >= th_) if th_ is not None else np.array([])
+            hit = ret >= th_ if th_ is not None else np.zeros(len(ret), bool)
+        reached = np.flatnonzero(hit)
         best = best_so_far(score, lower_is_better=False)  # score: higher is better on every env (Acrobot: -steps)
         n = len(ret)
         first = int(reached[0]) + 1 if len(reached) else np.nan
-        # stability (one definition, sb3_denfac.common.performance); halfway from the run's worst episode
-        hit = np.zeros(len(score), bool)
-        hit[reached] = True
-        stab = fall_back_fraction(score, False, hit)
+        stab = fall_back_fraction(score, False, hit)  # halfway from the run's worst episode
         row = dict(
             config=r["config"]
             if r["episodes"] == DEFAULT_EPISODES.get(env, r["episodes"]) or upto
@@ -111,7 +109,7 @@ def full_budget_options(runs: pd.DataFrame) -> list[str]:
     for env, budget in (("pendulum", 40), ("halfcheetah", 100), ("cartpole", 100), ("invpendulum", 100), ("acrobot", 100)):
         suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
         configs = [f"default{suffix}", f"default+proximal{suffix}"]
-        if runs.config.isin(configs).any() and (runs.env == env).any():
+        if ((runs.env == env) & runs.config.isin(configs)).any():
             out.append(f"### {env}, {budget} episodes\n")
             out.append(table(runs, env, configs))
     return out
