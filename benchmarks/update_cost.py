@@ -8,6 +8,7 @@ interleaved run, with the same thread count:
 - ``fast_ftz``: the fast updater with ``torch.set_flush_denormal(True)`` around it, which shows whether any
   subnormal arithmetic is left to flush;
 - ``floor``: the update's matrix-multiply FLOPs divided by the GFLOP/s of a large matmul timed in the same repeats;
+- ``gemms``: the update's matrix products alone, at their own shapes and counts (what BLAS takes for that arithmetic);
 - ``ddpg``: SB3 DDPG's ``train()`` for one episode of data (one batch-64 step per transition; x9 with the paper's 8
   additional updates per step), on the same transitions.
 
@@ -32,6 +33,7 @@ import platform
 import subprocess
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import gymnasium as gym
@@ -98,34 +100,50 @@ def flush_denormal():
 
 
 # ----- arithmetic floor ----------------------------------------------------------------------------------------------
-def linear_flops(n: int, sizes: list[int], weight_grad: bool, input_grad_from: int | None) -> float:
-    """Matmul FLOPs of a forward (+ backward) pass of an MLP with layer sizes ``sizes`` over n samples."""
-    flops = 0.0
+def mlp_matmuls(n: int, sizes: list[int], weight_grad: bool, input_grad_from: int | None) -> list[tuple[int, int, int]]:
+    """The (m, k, p) products (m x k @ k x p, feature-major as the fast updater) of an MLP pass over n samples:
+    forward W X, optionally the weight gradient G X^T and the input gradient W^T G of layers >= ``input_grad_from``."""
+    shapes = []
     for i in range(len(sizes) - 1):
-        mac = n * sizes[i] * sizes[i + 1]
-        flops += 2 * mac  # forward
+        fan_in, fan_out = sizes[i], sizes[i + 1]
+        shapes.append((fan_out, fan_in, n))
         if weight_grad:
-            flops += 2 * mac
+            shapes.append((fan_out, n, fan_in))
         if input_grad_from is not None and i >= input_grad_from:
-            flops += 2 * mac
-    return flops
+            shapes.append((fan_in, fan_out, n))
+    return shapes
 
 
-def update_flops(model) -> float:
-    """Matmul FLOPs of one update of ``model`` (full batch over its buffer)."""
+def update_matmuls(model) -> Counter:
+    """The matrix products of one update of ``model`` (full batch over its buffer), with their counts."""
     n = model.replay_buffer.size()
     o, a = model.observation_space.shape[0], model.action_space.shape[0]
     arch = model.policy.net_arch
     actor, critic = [o, *arch["pi"], a], [o + a, *arch["qf"], 1]
-    targets = 2 * linear_flops(n, actor, False, None) + linear_flops(n, critic, False, None)
-    critic_step = linear_flops(n, critic, True, 1)
+    hidden = arch["qf"][0]
+    targets = 2 * mlp_matmuls(n, actor, False, None) + mlp_matmuls(n, critic, False, None)
+    critic_step = mlp_matmuls(n, critic, True, 1)
     # actor step: actor forward + backward, critic forward + d/d action. The critic's first layer only through its
     # action columns (forward and input gradient): its observation part is fixed over the G steps, once per iteration.
-    hidden = arch["qf"][0]
-    critic_obs_part = 2 * n * o * hidden
-    actor_step = linear_flops(n, actor, True, 1) + linear_flops(n, critic, False, 1) - critic_obs_part + 2 * n * a * hidden
-    per_iteration = targets + critic_obs_part + model.critic_steps * critic_step + model.actor_steps * actor_step
-    return model.n_fitted_iterations * per_iteration
+    actor_step = mlp_matmuls(n, actor, True, 1) + [(hidden, a, n), (a, hidden, n)] + mlp_matmuls(n, critic[1:], False, 0)
+    per_iteration = targets + [(hidden, o, n)] + model.critic_steps * critic_step + model.actor_steps * actor_step
+    return Counter({shape: count * model.n_fitted_iterations for shape, count in Counter(per_iteration).items()})
+
+
+def matmul_flops(shapes: Counter) -> float:
+    return float(sum(2 * m * k * p * count for (m, k, p), count in shapes.items()))
+
+
+def matmul_replay(shapes: Counter) -> callable:
+    """Only the update's matrix products, at its shapes and counts (random operands, preallocated outputs)."""
+    operands = [(th.randn(m, k), th.randn(k, p), th.empty(m, p), count) for (m, k, p), count in shapes.items()]
+
+    def replay() -> None:
+        for left, right, out, count in operands:
+            for _ in range(count):
+                th.mm(left, right, out=out)
+
+    return replay
 
 
 # ----- SB3 DDPG ------------------------------------------------------------------------------------------------------
@@ -159,6 +177,7 @@ def time_buffer(path: Path, env_id: str, repeats: int) -> dict:
     models = {key: load_denfac(path, update_path) for key, update_path in (("fast", "fast"), ("autograd", "plain"))}
     models["fast_ftz"] = load_denfac(path, "fast")
     big = (th.randn(MATMUL_SIZE, MATMUL_SIZE), th.randn(MATMUL_SIZE, MATMUL_SIZE))
+    shapes = update_matmuls(models["fast"])
 
     def fast_ftz():
         with flush_denormal():
@@ -170,6 +189,7 @@ def time_buffer(path: Path, env_id: str, repeats: int) -> dict:
         fast_ftz=fast_ftz,
         ddpg=ddpg_episode(models["fast"], env_id),
         matmul=lambda: big[0] @ big[1],
+        gemms=matmul_replay(shapes),
     )
     times: dict[str, list[float]] = {k: [] for k in variants}
     for fn in variants.values():
@@ -181,7 +201,7 @@ def time_buffer(path: Path, env_id: str, repeats: int) -> dict:
             times[key].append(time.perf_counter() - start)
     med = {k: float(np.median(v)) for k, v in times.items()}
     gflops = 2 * MATMUL_SIZE**3 / med["matmul"] / 1e9
-    flops = update_flops(models["fast"])
+    flops = matmul_flops(shapes)
     floor = flops / (gflops * 1e9)
     return dict(
         buffer_size=models["fast"].replay_buffer.size(),
@@ -195,6 +215,9 @@ def time_buffer(path: Path, env_id: str, repeats: int) -> dict:
         ddpg_episode_s=med["ddpg"],
         autograd_over_fast=med["autograd"] / med["fast"],
         fast_over_floor=med["fast"] / floor,
+        gemms_s=med["gemms"],
+        gemms_over_floor=med["gemms"] / floor,
+        fast_over_gemms=med["fast"] / med["gemms"],
         fast_over_fast_ftz=med["fast"] / med["fast_ftz"],
         times_s=times,
     )
@@ -238,14 +261,16 @@ def write_markdown(results: dict) -> str:
         "(other jobs ran on the machine: compare ratios within a row).",
         "",
         "| env | buffer | D | threads | fast (s) | autograd (s) | fast + FTZ (s) | floor (s) | GFLOP | matmul GFLOP/s "
-        "| autograd / fast | fast / floor | fast / (fast + FTZ) | DDPG episode (s) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| autograd / fast | fast / floor | GEMMs alone (s) | GEMMs / floor | fast / GEMMs | fast / (fast + FTZ) "
+        "| DDPG episode (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results["runs"]:
         lines.append(
             f"| {r['env']} | {r['buffer']} | {r['buffer_size']} | {r['threads']} | {r['fast_s']:.3f} | "
             f"{r['autograd_s']:.3f} | {r['fast_ftz_s']:.3f} | {r['floor_s']:.3f} | {r['update_gflop']:.2f} | "
             f"{r['matmul_gflops_per_s']:.0f} | **{r['autograd_over_fast']:.1f}x** | **{r['fast_over_floor']:.1f}x** | "
+            f"{r['gemms_s']:.3f} | {r['gemms_over_floor']:.1f}x | {r['fast_over_gemms']:.1f}x | "
             f"{r['fast_over_fast_ftz']:.2f} | {r['ddpg_episode_s']:.2f} |"
         )
     for run in results.get("training_runs", []):
@@ -264,6 +289,9 @@ def write_markdown(results: dict) -> str:
         "arithmetic is left).",
         "- floor: matmul FLOPs of the update (forward, weight and input gradients; elementwise work not counted) / "
         "GFLOP/s of a 1024x1024 float32 matmul timed in the same interleaved repeats and thread count.",
+        "- GEMMs alone: the update's matrix products only, at its own shapes and counts (`th.mm` on preallocated "
+        "random operands, feature-major), in the same repeats: the time BLAS needs for the arithmetic the floor counts, "
+        "at these skinny shapes; fast / GEMMs is what the elementwise work and the Python around it add.",
         f"- DDPG: SB3 DDPG `train()` for one episode (one batch-{DDPG_BATCH} step per transition, the same networks "
         "without batch norm) on the same transitions; x9 with the paper's 8 additional updates per step.",
     ]
