@@ -145,18 +145,22 @@ def _md(df: pd.DataFrame) -> str:
 
 
 def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
-    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the estimated CPU hours still needed
-    (``figure3_cost.py``'s plan)."""
+    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the CPU hours still needed: the median
+    CPU seconds of the cell's finished runs times the seeds left, or where it has none, the plan's estimate
+    (``figure3_cost.py``, full-length episodes: an upper bound where episodes end early), marked <=."""
     done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
+    measured = runs.groupby(["algo", "env"])["cpu_time"].median().to_dict() if not runs.empty else {}
     rows = {}
     for algo in suite.algos:
         want = suite.seeds(algo)
         row, hours = {}, 0.0
         for env in suite.envs:
             left = sum((algo, env, s) not in done for s in want)
-            cost = left * estimated_cost(algo, env) / 3600
+            per_run = measured.get((algo, env), estimated_cost(algo, env))
+            cost = left * per_run / 3600
             hours += cost
-            row[env] = f"{len(want) - left}/{len(want)}" + (f", {cost:.2f} h" if left and np.isfinite(cost) else "")
+            bound = "" if (algo, env) in measured else "<="
+            row[env] = f"{len(want) - left}/{len(want)}" + (f", {bound}{cost:.2f} h" if left and np.isfinite(cost) else "")
         if hours != 0.0:
             rows[ALGOS[algo].label] = {**row, "CPU hours left": f"{hours:.2f}"}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
@@ -169,7 +173,13 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
         missing = missing_cells(suite, runs)
         lines += [f"Suite `{suite.name}`: {suite.description}.", ""]
         lines += (
-            ["Cells not complete (finished/wanted seeds, estimated CPU hours to finish):", "", _md(missing), ""]
+            [
+                "Cells not complete (finished/wanted seeds, CPU hours to finish: from the cell's finished runs, "
+                "or <= the plan's full-length estimate where it has none):",
+                "",
+                _md(missing),
+                "",
+            ]
             if not missing.empty
             else ["Every cell is complete.", ""]
         )

@@ -240,3 +240,16 @@ def test_cost_extrapolation_recovers_the_cost_models():
     online = episodes.assign(cpu_time=np.maximum(0, steps - 100) * 0.01)  # 10 ms per step after a 100-step warm-up
     row = cost.extrapolate(online, "sac", "acrobot", 100, {"learning_starts": "100"})
     assert row["model"] == "step" and row["estimate"] == pytest.approx(0.01 * 100 * 500, rel=1e-6)
+
+
+def test_missing_cells_cost_the_seeds_left_from_measured_runs():
+    import figure3_analysis
+    import pandas as pd
+
+    suite = suites.Suite("t", ("pendulum", "cartpole"), ((("sac",), (0, 1, 2)),), "test")
+    runs = pd.DataFrame(dict(algo=["sac", "sac"], env=["pendulum"] * 2, seed=[0, 1], cpu_time=[3600.0, 7200.0]))
+    row = figure3_analysis.missing_cells(suite, runs).iloc[0]
+    assert row["pendulum"] == "2/3, 1.50 h"  # one seed left at the median of the measured runs
+    planned = 3 * suites.estimated_cost("sac", "cartpole") / 3600
+    assert row["cartpole"] == f"0/3, <={planned:.2f} h"  # no run yet: the plan's upper bound
+    assert float(row["CPU hours left"]) == pytest.approx(1.5 + planned, abs=0.01)
