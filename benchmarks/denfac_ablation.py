@@ -163,8 +163,9 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["good-lr+beta1"] = merge(GOOD, FACTORS["lr"][0], FACTORS["beta1"][0])
     c["good+lr3e-4"] = merge(GOOD, dict(learning_rate=3e-4))
     c["good+sigma0.2"] = merge(GOOD, dict(sigma=0.2))
-    c["good+nets64"] = merge(GOOD, dict(policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]))))  # = good
-    c["good+nets256"] = merge(GOOD, dict(policy_kwargs=dict(net_arch=dict(pi=[256, 256], qf=[256, 256]))))
+    wide = dict(net_arch=dict(pi=[256, 256], qf=[256, 256]))  # SB3 SAC's and TD3's default width
+    c["good+nets256"] = merge(GOOD, dict(policy_kwargs=wide))
+    c["default+proximal+nets256"] = merge(GOOD, dict(actor_proximal=1.0, policy_kwargs=wide))
     c["good+csteps100"] = merge(GOOD, dict(critic_steps=100))
     c["good+csteps25"] = merge(GOOD, dict(critic_steps=25))
     c["good+vecnorm"] = merge(GOOD, dict(_vecnorm=True))
@@ -187,12 +188,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["proto-cdq"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(clipped_double_q=True)))
     c["proto-tnorm"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(target_norm=True)))
     c["good+D3000"] = merge(GOOD, dict(buffer_size=3000))
-    c["proto-retain-D3000"] = merge(
-        GOOD,
-        dict(
-            buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=False, actor_per=False, retention="td")
-        ),
-    )
+    retain = dict(critic_per=False, actor_per=False, retention="td")
+    c["proto-retain-D3000"] = merge(GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=retain))
     c["proto-per-critic-D3000"] = merge(
         GOOD, dict(buffer_size=3000, _proto="PrioritisedDENFAC", _proto_kwargs=dict(critic_per=True))
     )
