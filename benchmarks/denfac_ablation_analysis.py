@@ -104,11 +104,12 @@ def to_markdown(df: pd.DataFrame) -> str:
 
 
 def full_budget_options(runs: pd.DataFrame) -> list[str]:
-    """Library default (0.2, ``default``) against the proximal actor (0.3's default) at each env's full budget."""
+    """Library default (0.2, ``default``) against the proximal actor (0.3's default), and the latter with 256-256
+    networks, at each env's full budget."""
     out = []
     for env, budget in (("pendulum", 40), ("halfcheetah", 100), ("cartpole", 100), ("invpendulum", 100), ("acrobot", 100)):
         suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
-        configs = [f"default{suffix}", f"default+proximal{suffix}"]
+        configs = [f"default{suffix}", f"default+proximal{suffix}", f"default+proximal+nets256{suffix}"]
         if ((runs.env == env) & runs.config.isin(configs)).any():
             out.append(f"### {env}, {budget} episodes\n")
             out.append(table(runs, env, configs))
