@@ -70,6 +70,9 @@ ENVS: dict[str, dict[str, Any]] = {
         ),
     ),
     "invpendulum": dict(id="InvertedPendulum-v5", episodes=100, steps=1000, gamma=0.99, faithful={}),
+    # held-out envs: never used to choose a setting, only to check that a choice made elsewhere carries over
+    "hopper": dict(id="Hopper-v5", episodes=100, steps=1000, gamma=0.99, faithful={}),
+    "reacher": dict(id="Reacher-v5", episodes=100, steps=50, gamma=0.99, faithful={}),
 }
 
 # The faithful Algorithm 1 (library defaults = Figure 5 / authors' code values).
@@ -166,6 +169,9 @@ def build_configs() -> dict[str, dict[str, Any]]:
     wide = dict(net_arch=dict(pi=[256, 256], qf=[256, 256]))  # SB3 SAC's and TD3's default width
     c["good+nets256"] = merge(GOOD, dict(policy_kwargs=wide))
     c["default+proximal+nets256"] = merge(GOOD, dict(actor_proximal=1.0, policy_kwargs=wide))
+    # 0.3's default (prototype form of actor_proximal=1.0: prox_norm="grad") with TD3's clipped double-Q targets
+    prox_cdq = dict(prox_coef=1.0, prox_norm="grad", clipped_double_q=True)
+    c["default+proximal+cdq"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=prox_cdq))
     c["good+csteps100"] = merge(GOOD, dict(critic_steps=100))
     c["good+csteps25"] = merge(GOOD, dict(critic_steps=25))
     c["good+vecnorm"] = merge(GOOD, dict(_vecnorm=True))
