@@ -18,7 +18,8 @@ from sb3_denfac.common.performance import best_so_far, fall_back_fraction
 RESULTS = Path(__file__).resolve().parent / "results" / "denfac_ablation"
 # return threshold per env for "episode of first return above"
 DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot": 30, "invpendulum": 100}
-DEFAULT_EPISODES |= {"hopper": 100, "reacher": 100}  # held-out envs (denfac_ablation.ENVS)
+HELD_OUT = ("hopper", "reacher")  # envs not used to choose the 0.3 settings (denfac_ablation.ENVS)
+DEFAULT_EPISODES |= dict.fromkeys(HELD_OUT, 100)
 THRESH = {"pendulum": -200.0, "halfcheetah": 50.0, "cartpole": -500.0, "invpendulum": 999.0, "acrobot": None}
 
 
@@ -106,20 +107,17 @@ def to_markdown(df: pd.DataFrame) -> str:
 
 def full_budget_options(runs: pd.DataFrame) -> list[str]:
     """Library default (0.2, ``default``) against the proximal actor (0.3's default), and the latter with 256-256
-    networks, at each env's full budget; Hopper-v5 and Reacher-v5 are held out (checks of a choice, not its basis)."""
+    networks or clipped double-Q, at each env's full budget; :data:`HELD_OUT` envs check a choice, not its basis."""
     out = []
-    envs = ["pendulum", "halfcheetah", "cartpole", "invpendulum", "acrobot", "hopper", "reacher"]
-    for env, budget in zip(envs, (40, 100, 100, 100, 100, 100, 100), strict=True):
+    full_budgets = {"pendulum": 40, "halfcheetah": 100, "cartpole": 100, "invpendulum": 100, "acrobot": 100}
+    full_budgets |= dict.fromkeys(HELD_OUT, 100)
+    for env, budget in full_budgets.items():
         suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
-        configs = [f"default{suffix}", f"default+proximal{suffix}", f"default+proximal+nets256{suffix}"]
-        configs.append(f"default+proximal+cdq{suffix}")
+        names = ("default", "default+proximal", "default+proximal+nets256", "default+proximal+cdq")
+        configs = [f"{name}{suffix}" for name in names]
         if ((runs.env == env) & runs.config.isin(configs)).any():
-            held_out = (
-                " (held out of the 0.3 settings; Reacher's Q diagnostics prompted the clipped double-Q probe)"
-                if env in ("hopper", "reacher")
-                else ""
-            )
-            out.append(f"### {env}, {budget} episodes{held_out}\n")
+            held_out = " (held out of the 0.3 settings; Reacher's Q diagnostics prompted the clipped double-Q probe)"
+            out.append(f"### {env}, {budget} episodes{held_out if env in HELD_OUT else ''}\n")
             out.append(table(runs, env, configs))
     return out
 
