@@ -32,6 +32,7 @@ for _p in (str(_HERE), str(_HERE.parent)):
         sys.path.insert(0, _p)
 
 import gymnasium as gym  # noqa: E402
+from denfac_critic_fit import Diagnostics  # noqa: E402
 from stable_baselines3.common.monitor import Monitor  # noqa: E402
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # noqa: E402
 
@@ -90,7 +91,7 @@ FAITHFUL: dict[str, Any] = dict(
     weighting="retrace",
     bootstrap_on_timeout=True,
     actor_proximal=0.0,
-    policy_kwargs=dict(net_arch=dict(pi=[20], qf=[50, 7]), batch_norm=True, init="paper"),
+    policy_kwargs=dict(net_arch=dict(pi=[20], qf=[50, 7]), batch_norm=True, init="paper", n_critics=1),
 )
 
 # The candidate general configuration (fitted Q with minibatches, kept actor, bigger nets, modest lr).
@@ -108,7 +109,7 @@ GOOD: dict[str, Any] = dict(
     weighting="none",
     bootstrap_on_timeout=True,
     actor_proximal=0.0,  # the 0.2 library default; the 0.3 default is `default+proximal`
-    policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]), batch_norm=False, init="default"),
+    policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]), batch_norm=False, init="default", n_critics=1),
 )
 
 # factor -> (faithful value, good value); each value is a dict of constructor overrides (policy_kwargs merged).
@@ -170,8 +171,9 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["good+nets256"] = merge(GOOD, dict(policy_kwargs=wide))
     c["default+proximal+nets256"] = merge(GOOD, dict(actor_proximal=1.0, policy_kwargs=wide))
     # 0.3's default (prototype form of actor_proximal=1.0: prox_norm="grad") with TD3's clipped double-Q targets
-    prox_cdq = dict(prox_coef=1.0, prox_norm="grad", clipped_double_q=True)
-    c["default+proximal+cdq"] = merge(GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=prox_cdq))
+    c["default+proximal+cdq"] = merge(
+        GOOD, dict(_proto="PlainDENFAC", _proto_kwargs=dict(prox_coef=1.0, prox_norm="grad", clipped_double_q=True))
+    )
     c["good+csteps100"] = merge(GOOD, dict(critic_steps=100))
     c["good+csteps25"] = merge(GOOD, dict(critic_steps=25))
     c["good+vecnorm"] = merge(GOOD, dict(_vecnorm=True))
@@ -204,6 +206,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default+per-critic"] = merge(GOOD, dict(prioritized="critic"))
     c["default+per-both"] = merge(GOOD, dict(prioritized="both"))
     c["default+proximal"] = merge(GOOD, dict(actor_proximal=1.0))
+    c["default+proximal+n_critics2"] = merge(c["default+proximal"], dict(policy_kwargs=dict(n_critics=2)))  # library cdq
     return c
 
 
@@ -225,66 +228,6 @@ def env_specific(env_key: str, cfg: dict[str, Any], config_name: str) -> dict[st
         kwargs = merge(kwargs, keep)
     kwargs["gamma"] = spec["gamma"]
     return kwargs
-
-
-class Diagnostics:
-    """Critic-fit measurements on the buffer after an update (eval mode, no gradient)."""
-
-    def __init__(self, every: int = 5):
-        self.every = every
-        self.rows: list[dict[str, float]] = []
-
-    def measure(self, model: Any, episode: int) -> None:
-        rb = model.replay_buffer
-        data = rb.all_samples(env=model._vec_normalize_env)
-        model.policy.set_training_mode(False)
-        qf = getattr(model, "_q", None)
-        qfun = (lambda o, a: qf(model.critic, o, a)) if qf is not None else model.critic
-        with th.no_grad():
-            q = qfun(data.observations, data.actions).squeeze(1)
-            na = model.actor(data.next_observations).clamp(-1, 1)
-            qn = qfun(data.next_observations, na).squeeze(1)
-            term = data.dones.squeeze(1)
-            if not model.bootstrap_on_timeout:
-                term = th.clamp(term + data.timeouts.squeeze(1), max=1.0)
-            y = data.rewards.squeeze(1) + model.gamma * (1 - term) * qn
-            # Monte-Carlo returns of the stored trajectories, bootstrapped by Q only at a time-limit end
-            r = data.rewards.squeeze(1).numpy()
-            d = data.dones.squeeze(1).numpy()
-            to = data.timeouts.squeeze(1).numpy()
-            n = len(r)
-            order = np.arange(n)
-            if rb.full:  # chronological order of a wrapped FIFO
-                order = np.roll(order, -rb.pos)
-            mc = np.zeros(n)
-            g = 0.0
-            qn_np = qn.numpy()
-            for j in range(n - 1, -1, -1):
-                i = order[j]
-                end = d[i] > 0 or to[i] > 0 or j == n - 1
-                if end:
-                    g = 0.0 if (d[i] > 0 and to[i] == 0) else float(qn_np[i])
-                g = r[i] + model.gamma * g
-                mc[i] = g
-            qnp = q.numpy()
-            var_y = float(y.var())
-            row = dict(
-                episode=episode,
-                n=n,
-                td_mse=float(((q - y) ** 2).mean()),
-                target_var=var_y,
-                fit_r2=1.0 - float(((q - y) ** 2).mean()) / max(var_y, 1e-12),
-                q_mean=float(q.mean()),
-                q_std=float(q.std()),
-                mc_mean=float(mc.mean()),
-                mc_std=float(mc.std()),
-                q_mc_corr=float(np.corrcoef(qnp, mc)[0, 1]) if qnp.std() > 0 and mc.std() > 0 else float("nan"),
-                q_mc_bias=float((qnp - mc).mean()),
-            )
-            stats = getattr(model, "_last_update_stats", None)
-            if stats is not None and "weights" in stats:
-                row["iw_mean"] = float(stats["weights"].mean())
-        self.rows.append(row)
 
 
 def make_env(env_key: str, seed: int, vecnorm: bool):

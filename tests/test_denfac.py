@@ -67,6 +67,15 @@ class IncreasingQ(nn.Module):
     def forward(self, obs, actions):
         return 100.0 * actions.sum(dim=1, keepdim=True)
 
+    target_q = forward  # the updaters' critic interface (DENFACCritic's): one Q network
+
+    def all_q(self, obs, actions):
+        return [self(obs, actions)]
+
+    @property
+    def q_networks(self):
+        return [self]
+
     def set_training_mode(self, mode):
         self.train(mode)
 

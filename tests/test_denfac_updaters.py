@@ -50,6 +50,14 @@ class MultiActionEnv(gym.Env):
         dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), batch_norm=False)),
         # the proximal actor (options.py): full batch with BN and inverting gradients, mini-batches without BN
         dict(actor_proximal=1.0),
+        # clipped double Q: three critics, each with its own flat state, on the same mini-batches (beta1 = 0.9: with
+        # beta1 = 0, rounding-sized gradient components of a twin become lr-sized steps within the later plain updates)
+        dict(
+            batch_size=32,
+            reset_actor=False,
+            adam_betas=(0.9, 0.999),
+            policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), n_critics=3),
+        ),
         dict(
             actor_proximal=0.5,
             inverting_gradients=False,

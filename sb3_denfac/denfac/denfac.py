@@ -145,8 +145,9 @@ class DENFAC(
     :param tensorboard_log: TensorBoard log directory (None: no logging)
     :param policy_kwargs: policy keyword arguments: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper
         ``dict(pi=[20], qf=[50, 7])``), ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's;
-        "paper": N(0, 0.01^2)), ``bn_momentum``, ``activation_fn`` (see :class:`DENFACPolicy`); the keys it leaves out
-        take :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
+        "paper": N(0, 0.01^2)), ``n_critics`` (paper 1; 2: targets from the minimum of two critics, clipped double Q),
+        ``bn_momentum``, ``activation_fn`` (see :class:`DENFACPolicy`); the keys it leaves out take
+        :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
@@ -210,7 +211,7 @@ class DENFAC(
             )
         check_choice("update_path", update_path, UPDATE_PATHS)
         self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
-            prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size, update_path
+            prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size
         )
         if not _init_setup_model:  # SB3's load (saved attributes follow): files of <= 0.2 had the proximal actor off
             self.actor_proximal = 0.0
@@ -285,6 +286,7 @@ class DENFAC(
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()
+        self._fit_settings()  # refuses update_path="fast" with an option only the autograd updater implements
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
@@ -314,13 +316,18 @@ class DENFAC(
         for _ in range(gradient_steps):
             self._update()
 
-    def _make_updater(self) -> Updater:
-        """The updater that carries out this update (``update_path``; see :mod:`~sb3_denfac.denfac.updaters`)."""
+    def _fit_settings(self) -> FitSettings:
+        """This model's :class:`FitSettings`; a ValueError if ``update_path="fast"`` cannot carry them out."""
         settings = FitSettings.of(self)
         unsupported = settings.autograd_only()  # options on that only the autograd updater implements
         if self.update_path == "fast" and unsupported:
             raise ValueError(fast_refusal(unsupported))
-        if self.update_path == "plain" or unsupported:
+        return settings
+
+    def _make_updater(self) -> Updater:
+        """The updater that carries out this update (``update_path``; see :mod:`~sb3_denfac.denfac.updaters`)."""
+        settings = self._fit_settings()
+        if self.update_path == "plain" or settings.autograd_only():
             return AutogradUpdater(self.policy, settings)
         layers = supported_networks(self.policy)
         if layers is None:

@@ -178,7 +178,8 @@ class _FlatNet:
 
     def write_back(self) -> None:
         """Store the Adam moments in the torch optimizer's state (a later plain update or a save sees them)."""
-        self.optimizer.state.clear()
+        for p in self.params:  # this network's entries only: the critic's optimizer also holds the twin Q networks'
+            self.optimizer.state.pop(p, None)
         if self.step_count == 0:
             return
         offset = 0
@@ -192,8 +193,9 @@ class _FlatNet:
             offset += n
 
 
-def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
-    """Parsed actor and critic layers if the fast path supports this policy (vector observations, Adam), else None."""
+def supported_networks(policy) -> tuple[list[_Layer], list[list[_Layer]]] | None:
+    """Parsed layers of the actor and of each Q network of the critic if the fast path supports this policy (vector
+    observations, Adam), else None."""
     from gymnasium import spaces
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
@@ -210,10 +212,10 @@ def supported_networks(policy) -> tuple[list[_Layer], list[_Layer]] | None:
             return None
     if not isinstance(policy.observation_space, spaces.Box) or len(policy.observation_space.shape) != 1:
         return None
-    actor_layers, critic_layers = parse_bn_mlp(policy.actor.mu), parse_bn_mlp(policy.critic.qf)
-    if actor_layers is None or critic_layers is None:
+    actor_layers, critic_layers = parse_bn_mlp(policy.actor.mu), [parse_bn_mlp(q) for q in policy.critic.q_networks]
+    if actor_layers is None or any(layers is None for layers in critic_layers):
         return None
-    return actor_layers, critic_layers
+    return actor_layers, critic_layers  # type: ignore[return-value]
 
 
 class FastUpdater(Updater):
@@ -222,10 +224,14 @@ class FastUpdater(Updater):
     Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`.
     """
 
-    def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer], critic_layers: list[_Layer]):
+    def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer], critic_layers: list[list[_Layer]]):
         super().__init__(policy, settings)
         self.actor_net = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
-        self.critic_net = _FlatNet(policy.critic.qf, critic_layers, policy.critic.optimizer)
+        self.critic_nets = [
+            _FlatNet(q_net, layers, policy.critic.optimizer)
+            for q_net, layers in zip(policy.critic.q_networks, critic_layers, strict=True)
+        ]
+        self.critic_net = self.critic_nets[0]  # Q_1, the one the actor ascends
         # actor_proximal: pi_old = the actor at the start of the update (eval mode), as frozen folded affines
         self.old_actor_affines = None
         if settings.actor_proximal > 0:
@@ -233,15 +239,16 @@ class FastUpdater(Updater):
 
     def reset_critic(self) -> None:
         super().reset_critic()
-        self.critic_net.reset()
+        for net in self.critic_nets:
+            net.reset()
 
     def reset_actor(self) -> None:
         super().reset_actor()
         self.actor_net.reset()
 
     def finish(self) -> None:
-        self.actor_net.write_back()
-        self.critic_net.write_back()
+        for net in (self.actor_net, *self.critic_nets):
+            net.write_back()
 
     @th.no_grad()
     def actor(self, obs: th.Tensor) -> th.Tensor:
@@ -250,32 +257,42 @@ class FastUpdater(Updater):
 
     @th.no_grad()
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """Q(s, a) in eval mode, (N, 1) like ``policy.critic(obs, actions)``."""
-        return self.critic_net.eval_forward(th.cat([obs.float(), actions], dim=1).t()).t()
+        """min_j Q_j(s, a) in eval mode, (N, 1) like ``policy.critic.target_q(obs, actions)``."""
+        inputs = th.cat([obs.float(), actions], dim=1).t()
+        values = [net.eval_forward(inputs) for net in self.critic_nets]
+        return (values[0] if len(values) == 1 else th.stack(values).amin(dim=0)).t()
 
     @th.no_grad()
     def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
-        net, steps = self.critic_net, self.settings.critic_steps
+        nets, steps = self.critic_nets, self.settings.critic_steps
         if self.fresh_bn_statistics(self.policy.critic):
-            net.reset_bn_counts()
+            for net in nets:
+                net.reset_bn_counts()
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
         n = self.sample_count(n_full)
         # Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
-        ws = eager_steps.Workspace(net.spec.sizes, n, inputs)
-        fixed = eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+        workspaces = [eager_steps.Workspace(net.spec.sizes, n, inputs) for net in nets]
+        fixed = [
+            eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+            for net, ws in zip(nets, workspaces, strict=True)
+        ]
         scaled_full = c_t * (2.0 / n_full)
-        loss = None
+        losses = []
         for step in range(steps):
-            idx = self.batch_indices(n_full)
+            idx = self.batch_indices(n_full)  # one mini-batch for every Q network, as the autograd updater
             if idx is None:
                 x, q, c2 = inputs, q_t, scaled_full
             else:
                 x, q, c2 = inputs[:, idx], q_t[:, idx], c_t[:, idx] * (2.0 / n)
-            loss = eager_steps.critic_step(net, ws, x, fixed, q, c2, self.settings.max_grad_norm, want_loss=step == steps - 1)
-        net.finish_fit(fixed)
-        return loss  # type: ignore[return-value]
+            losses = [
+                eager_steps.critic_step(net, ws, x, fix, q, c2, self.settings.max_grad_norm, want_loss=step == steps - 1)
+                for net, ws, fix in zip(nets, workspaces, fixed, strict=True)
+            ]
+        for net, fix in zip(nets, fixed, strict=True):
+            net.finish_fit(fix)
+        return losses[0]  # type: ignore[return-value]
 
     @th.no_grad()
     def fit_actor(self, obs: th.Tensor) -> th.Tensor:

@@ -43,7 +43,7 @@ PRIORITIZED = ("none", "critic", "both")
 
 
 def check_options(
-    prioritized: Any, alpha: Any, beta: Any, eps: Any, proximal: Any, batch_size: int | None, update_path: str
+    prioritized: Any, alpha: Any, beta: Any, eps: Any, proximal: Any, batch_size: int | None
 ) -> tuple[str, float, float, float, float]:
     """The validated options (``prioritized``, ``priority_alpha``, ``priority_beta``, ``priority_eps``,
     ``actor_proximal``), or a ValueError naming the argument."""
@@ -57,9 +57,6 @@ def check_options(
             f"prioritized={prioritized!r} draws mini-batches from the priorities and needs an int batch_size, "
             "got batch_size=None (full batch)"
         )
-    unsupported = autograd_only(prioritized)
-    if update_path == "fast" and unsupported:
-        raise ValueError(fast_refusal(unsupported))
     return prioritized, alpha, beta, eps, proximal
 
 

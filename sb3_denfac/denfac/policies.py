@@ -18,6 +18,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
+from sb3_denfac.common.checks import check_number
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
 
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "qf": [50, 7]}
@@ -32,7 +33,11 @@ class DENFACActor(DeterministicActor):
 
 
 class DENFACCritic(BaseModel):
-    """Q(s, a) on the concatenation of features and scaled action, one linear output.
+    """Q(s, a) on the concatenation of features and scaled action, one linear output per Q network.
+
+    ``qf`` is Q_1, the network the actor ascends (eq. 5); ``n_critics`` > 1 adds ``twin_qfs`` Q_2.. Q_n, each with its
+    own initialisation, fitted to the same targets, which take the minimum over all of them (clipped double Q,
+    Fujimoto et al. 2018, TD3; :meth:`target_q`).
 
     :param observation_space: observation space
     :param action_space: Box action space
@@ -44,6 +49,7 @@ class DENFACCritic(BaseModel):
     :param bn_momentum: BatchNorm1d momentum (None: cumulative average)
     :param init: "paper" or "default"
     :param normalize_images: whether to normalise images
+    :param n_critics: number of Q networks (paper: 1)
     """
 
     def __init__(
@@ -58,24 +64,39 @@ class DENFACCritic(BaseModel):
         bn_momentum: float | None = None,
         init: str = "paper",
         normalize_images: bool = True,
+        n_critics: int = 1,
     ):
         super().__init__(
             observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
         )
+        n_critics = check_number("n_critics", n_critics, minimum=1, integer=True, note=" (1: one critic, as the paper)")
         action_dim = get_action_dim(self.action_space)
-        self.qf = create_bn_mlp(
-            features_dim + action_dim,
-            1,
-            net_arch,
-            batch_norm,
-            activation_fn,
-            bn_momentum,
-            init,  # type: ignore[arg-type]
-        )
+
+        def q_network() -> nn.Sequential:
+            return create_bn_mlp(features_dim + action_dim, 1, net_arch, batch_norm, activation_fn, bn_momentum, init)  # type: ignore[arg-type]
+
+        self.n_critics = n_critics
+        self.qf = q_network()  # Q_1 (the only one of files saved before n_critics existed)
+        self.twin_qfs = nn.ModuleList(q_network() for _ in range(n_critics - 1))
+
+    @property
+    def q_networks(self) -> list[nn.Module]:
+        """Q_1, ..., Q_n (SB3's ``ContinuousCritic.q_networks``)."""
+        return [self.qf, *self.twin_qfs]
+
+    def all_q(self, obs: th.Tensor, actions: th.Tensor) -> list[th.Tensor]:
+        """Q_1(s, a), ..., Q_n(s, a), each of shape (N, 1)."""
+        inputs = th.cat([self.extract_features(obs, self.features_extractor), actions], dim=1)
+        return [q_net(inputs) for q_net in self.q_networks]
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """Q_1(s, a), shape (N, 1): the value the actor ascends (SB3's ``q1_forward``)."""
         features = self.extract_features(obs, self.features_extractor)
         return self.qf(th.cat([features, actions], dim=1))
+
+    def target_q(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """min_j Q_j(s, a), shape (N, 1): the bootstrap value of the targets of eq. (4) (clipped double Q)."""
+        return th.min(th.cat(self.all_q(obs, actions), dim=1), dim=1, keepdim=True).values
 
 
 class DENFACPolicy(BasePolicy):
@@ -99,6 +120,7 @@ class DENFACPolicy(BasePolicy):
     :param normalize_images: whether to normalise images
     :param optimizer_class: optimiser (default Adam)
     :param optimizer_kwargs: optimiser keyword arguments (DENFAC passes ``betas`` and ``eps``)
+    :param n_critics: Q networks of the critic (paper: 1; 2 = clipped double Q, see :class:`DENFACCritic`)
     """
 
     actor: DENFACActor
@@ -122,6 +144,7 @@ class DENFACPolicy(BasePolicy):
         normalize_images: bool = True,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
+        n_critics: int = 1,
     ):
         super().__init__(
             observation_space,
@@ -144,6 +167,7 @@ class DENFACPolicy(BasePolicy):
         self.sigma = sigma
         self.actor_learning_rate = actor_learning_rate
         self.critic_learning_rate = critic_learning_rate
+        self.n_critics = n_critics
         common = dict(
             observation_space=self.observation_space,
             action_space=self.action_space,
@@ -154,7 +178,7 @@ class DENFACPolicy(BasePolicy):
             normalize_images=normalize_images,
         )
         self.actor_kwargs = {**common, "net_arch": archs["pi"], "sigma": sigma}
-        self.critic_kwargs = {**common, "net_arch": archs["qf"]}
+        self.critic_kwargs = {**common, "net_arch": archs["qf"], "n_critics": n_critics}
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
@@ -185,6 +209,7 @@ class DENFACPolicy(BasePolicy):
                 optimizer_kwargs=self.optimizer_kwargs,
                 features_extractor_class=self.features_extractor_class,
                 features_extractor_kwargs=self.features_extractor_kwargs,
+                n_critics=self.n_critics,
             )
         )
         return data

@@ -3,19 +3,21 @@
 ``DENFAC._update`` is Algorithm 1 written once; everything it does to the networks goes through an :class:`Updater`:
 
 - ``actor(s)`` and ``critic(s, a)``: pi_{k-1} and Q_{k-1} in eval mode (running statistics), for the targets q_k and
-  the importance weights c of eq. (4);
+  the importance weights c of eq. (4); with ``n_critics`` > 1 Q_{k-1} is the minimum over the critics (clipped double
+  Q, :class:`~sb3_denfac.denfac.policies.DENFACCritic`);
 - ``set_priorities(s, a, q)``: with ``prioritized`` on, the TD errors q_k - Q_{k-1}(s, a) of the buffer, before any
   reset, set the sampling priorities of the iteration's mini-batches (:mod:`~sb3_denfac.denfac.options`);
 - ``reset_critic()`` and ``reset_actor()``: a random re-initialisation, with a fresh Adam state;
-- ``fit_critic(s, a, q, c)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4);
-- ``fit_actor(s)``: G Adam steps ascending 1/N sum Q(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked (with
+- ``fit_critic(s, a, q, c)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for each Q
+  network, on the same mini-batches;
+- ``fit_actor(s)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked (with
   ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
 - ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
 (hand-written steps on flat parameters). Of the options of :mod:`~sb3_denfac.denfac.options`, both implement the
-proximal actor; prioritised sampling exists in the autograd updater only.
+proximal actor and several critics (``n_critics``); prioritised sampling exists in the autograd updater only.
 """
 
 from __future__ import annotations
@@ -118,7 +120,7 @@ class Updater(ABC):
 
     @abstractmethod
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """Q(s, a) in eval mode, shape (N, 1)."""
+        """Q(s, a) in eval mode, shape (N, 1): the minimum over the Q networks (the one Q network of the paper)."""
 
     @abstractmethod
     def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
@@ -144,6 +146,10 @@ class AutogradUpdater(Updater):
     def __init__(self, policy: nn.Module, settings: FitSettings):
         super().__init__(policy, settings)
         self.sampler: PrioritisedSampler | None = None
+        # gradient-norm groups of the critic: Q_1 with any features extractor, then each twin Q network
+        twins = [list(q_net.parameters()) for q_net in policy.critic.q_networks[1:]]
+        twin_ids = {id(p) for group in twins for p in group}
+        self.clip_groups = [[p for p in policy.critic.parameters() if id(p) not in twin_ids], *twins]
         self.old_actor: nn.Module | None = None
         if settings.actor_proximal > 0:  # pi_old: frozen, eval mode (running statistics of the start of the update)
             self.old_actor = copy.deepcopy(policy.actor)
@@ -157,7 +163,7 @@ class AutogradUpdater(Updater):
 
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         self.policy.critic.set_training_mode(False)
-        return self.policy.critic(obs, actions)
+        return self.policy.critic.target_q(obs, actions)
 
     def set_priorities(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor) -> None:
         settings = self.settings
@@ -165,7 +171,8 @@ class AutogradUpdater(Updater):
             return
         assert settings.batch_size is not None  # checked by DENFAC: prioritised sampling draws mini-batches
         with th.no_grad():
-            td_errors = q_targets - self.critic(obs, actions)
+            self.policy.critic.set_training_mode(False)
+            td_errors = q_targets - self.policy.critic(obs, actions)  # delta of Q_1, the critic the actor ascends
         self.sampler = PrioritisedSampler(
             td_errors, settings.priority_alpha, settings.priority_beta, settings.priority_eps, settings.batch_size
         )
@@ -186,13 +193,17 @@ class AutogradUpdater(Updater):
             o, a, q, c = (
                 (obs, actions, q_targets, weights) if idx is None else (obs[idx], actions[idx], q_targets[idx], weights[idx])
             )
-            errors = c * (critic(o, a) - q).pow(2)
-            loss = (errors if w is None else w * errors).mean()
             critic.optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if settings.max_grad_norm is not None:
-                clip_grad_norm_(critic.parameters(), settings.max_grad_norm)
+            losses = []
+            for q_value in critic.all_q(o, a):  # each Q network on the same mini-batch and targets
+                errors = c * (q_value - q).pow(2)
+                losses.append((errors if w is None else w * errors).mean())
+            sum(losses).backward()
+            if settings.max_grad_norm is not None:  # each Q network's own norm, as if it were alone
+                for group in self.clip_groups:
+                    clip_grad_norm_(group, settings.max_grad_norm)
             critic.optimizer.step()
+            loss = losses[0]
         critic.set_training_mode(False)
         return loss.detach()
 
