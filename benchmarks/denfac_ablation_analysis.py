@@ -20,6 +20,7 @@ RESULTS = Path(__file__).resolve().parent / "results" / "denfac_ablation"
 DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot": 30, "invpendulum": 100}
 HELD_OUT = ("hopper", "reacher")  # envs not used to choose the 0.3 settings (denfac_ablation.ENVS)
 DEFAULT_EPISODES |= dict.fromkeys(HELD_OUT, 100)
+TWIN = "default+proximal+n_critics2"  # the library's clipped double Q (n_critics=2) on 0.3's default
 THRESH = {"pendulum": -200.0, "halfcheetah": 50.0, "cartpole": -500.0, "invpendulum": 999.0, "acrobot": None}
 
 
@@ -107,16 +108,20 @@ def to_markdown(df: pd.DataFrame) -> str:
 
 def full_budget_options(runs: pd.DataFrame) -> list[str]:
     """Library default (0.2, ``default``) against the proximal actor (0.3's default), and the latter with 256-256
-    networks or clipped double-Q, at each env's full budget; :data:`HELD_OUT` envs check a choice, not its basis."""
+    networks or clipped double-Q (prototype ``cdq``, library :data:`TWIN`), at each env's full budget; :data:`HELD_OUT`
+    envs check a choice, not its basis."""
     out = []
     full_budgets = {"pendulum": 40, "halfcheetah": 100, "cartpole": 100, "invpendulum": 100, "acrobot": 100}
     full_budgets |= dict.fromkeys(HELD_OUT, 100)
     for env, budget in full_budgets.items():
         suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
-        names = ("default", "default+proximal", "default+proximal+nets256", "default+proximal+cdq")
+        names = ("default", "default+proximal", "default+proximal+nets256", "default+proximal+cdq", TWIN)
         configs = [f"{name}{suffix}" for name in names]
         if ((runs.env == env) & runs.config.isin(configs)).any():
-            held_out = " (held out of the 0.3 settings; Reacher's Q diagnostics prompted the clipped double-Q probe)"
+            held_out = (
+                " (held out of the 0.3 settings; Reacher's Q diagnostics prompted the clipped double-Q probe, Hopper is"
+                " held out of it)"
+            )
             out.append(f"### {env}, {budget} episodes{held_out if env in HELD_OUT else ''}\n")
             out.append(table(runs, env, configs))
     return out
