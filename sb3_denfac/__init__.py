@@ -15,5 +15,5 @@ from sb3_denfac.ddpg import DDPG  # noqa: E402
 from sb3_denfac.denfac import DENFAC  # noqa: E402
 from sb3_denfac.nfac import NFAC  # noqa: E402
 
-__version__ = "0.3.0"
+__version__ = "0.4.0"
 __all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "EpisodePerformanceCallback", "register_envs"]

@@ -217,6 +217,7 @@ def test_default_configuration_learns_target_action(target_action_env):
     model = DENFAC("MlpPolicy", env, gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
     assert model.batch_size == 256 and not model.reset_actor and model.weighting == "none"
     assert not model.policy.actor.batch_norm and model.policy.net_arch == {"pi": [64, 64], "qf": [64, 64]}
+    assert model.critic.n_critics == 2 and model.actor_proximal == 1.0
     obs = np.stack([env.observation_space.sample() for _ in range(64)])
     start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
     model.learn(200)

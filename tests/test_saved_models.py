@@ -55,7 +55,9 @@ def test_v0_2_optimizer_state_and_rates_are_restored(name: str) -> None:
 
 
 def test_v0_2_denfac_keeps_the_plain_actor_update() -> None:
-    """0.2 saved no ``actor_proximal`` (the option was off by default then): the model loads with it off, not with
-    0.3's default, and a model saved now keeps the value it was built with."""
+    """0.2 saved no ``actor_proximal`` (the option was off by default then) and 0.2/0.3 no ``n_critics``: the model
+    loads with the proximal actor off and one critic, not with today's defaults, and a model saved now keeps the
+    values it was built with."""
     model = DENFAC.load(DATA / "denfac_v0.2_pendulum.zip", device="cpu")
     assert model.actor_proximal == 0.0 and DENFAC("MlpPolicy", "Pendulum-v1").actor_proximal == 1.0
+    assert model.critic.n_critics == 1 and DENFAC("MlpPolicy", "Pendulum-v1").critic.n_critics == 2

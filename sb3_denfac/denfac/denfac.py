@@ -67,21 +67,19 @@ class DENFAC(
 
     Two configurations (:mod:`~sb3_denfac.denfac.presets`):
 
-    - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam
-      (step 1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25
-      actor steps per iteration, the actor and the critic kept across iterations and episodes, 64-64 networks without
-      batch norm and PyTorch's initialisation, sigma = 0.1, no importance weights, and the proximal actor
-      (``actor_proximal=1.0``, :mod:`~.options`): the gradient of eq. (5), normalised, pulled back towards the actor
-      of the update's start, so an update moves the actions by about 1/(2 lambda) whatever the reward scale; without
-      it the actor jumps onto the critic's extrapolated optimum on Half-Cheetah, the next data leave the region where
-      the critic was fitted, and the critic diverges. Each change from the paper was measured alone, on Pendulum-v1
-      and Half-Cheetah (``benchmarks/results/denfac_ablation/``); the ones that matter:
-      importance weights (with a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor has moved, which throws
-      the data away; the one-step target uses pi_{k-1}(s') itself, so eq. 4 needs no weight to evaluate pi), the
-      N(0, 0.01) initialisation without batch norm (the signal vanishes through the layers), re-initialising the
-      actor at every fitted iteration (G steps from scratch: the policy jumps between updates), too few critic steps
-      (the critic is under-fitted on returns in the hundreds), and the step 0.1 together with beta1 = 0 (each Adam
-      step is then about lr * sign(g)). Batch norm and the 50-7 critic cost less; sigma and D barely matter there.
+    - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam (step
+      1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25 actor
+      steps per iteration, actor and critic kept across iterations and episodes, 64-64 networks without batch norm,
+      PyTorch's initialisation, sigma = 0.1, no importance weights, the proximal actor (``actor_proximal=1.0``,
+      :mod:`~.options`) and two critics (``n_critics=2``). Each change from the paper was measured alone
+      (``benchmarks/results/denfac_ablation/``). With a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor
+      has moved, which throws the data away (eq. (4)'s target uses pi_{k-1}(s') itself and needs no weight); N(0, 0.01)
+      weights without batch norm let the signal vanish; an actor re-initialised at every iteration jumps between
+      updates; 10 critic steps under-fit returns in the hundreds; step 0.1 with beta1 = 0 makes each step lr * sign(g).
+      The proximal actor moves the actions by about 1/(2 lambda) per update whatever the reward scale: without it the
+      actor jumps onto the critic's extrapolated optimum, the next data leave the fitted region and the critic diverges.
+      Two critics (clipped double Q, Fujimoto et al. 2018): with hundreds of critic steps per episode on its own
+      targets, one critic overestimates beyond any return the rewards allow and the actor climbs the error.
     - **Paper** (``DENFAC("MlpPolicy", env, **presets.PAPER)``, and the zoo YAML entries of the paper's envs with
       Figure 5's per-env values): Algorithm 1 as written, with the authors' solver and networks.
 
@@ -91,17 +89,13 @@ class DENFAC(
       paper-era authors' code, which treated them as terminal (fixed by them in 2017).
     - Loss scale: 1/N as in Algorithm 1 (the authors' code: 1/(2N)); Adam ignores it except via eps and clipping.
     - Target actions pi_{k-1}(s') are clipped to [-1, 1] (the executed policy never leaves the bounds).
-    - Batch norm (``policy_kwargs=dict(batch_norm=True)``, the paper's): targets and importance weights use eval mode
-      (running statistics); the critic is in eval mode during the actor steps (gradients of the fitted function, no
-      update of its statistics). With ``bn_momentum=None`` the running statistics are reset at every fit and are the
-      cumulative average over its steps, so eval mode uses the statistics of the buffer.
+    - Batch norm (``batch_norm=True``, the paper's): targets and importance weights use eval mode (running statistics);
+      the critic is in eval mode during the actor steps (gradients of the fitted function, its statistics unchanged).
+      With ``bn_momentum=None`` the statistics are reset at every fit and average its steps (those of the buffer).
     - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
-    - Importance weights below sqrt(float32's smallest normal) are exactly 0 (subnormal arithmetic is many times
-      slower; their contribution is below float32's resolution).
-    - Budget: ``learn(total_timesteps)`` stops at ``total_timesteps``, also inside an episode, and then updates on the
-      buffer as it is (the unfinished episode bootstraps); see :mod:`sb3_denfac.common.budget`.
-    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): NaN/inf observations or rewards, corrupted
-      or foreign zips and action spaces other than finite Boxes raise errors that name the problem.
+    - Importance weights below sqrt(float32's smallest normal) are exactly 0 (subnormals are many times slower).
+    - Budget: ``learn(total_timesteps)`` stops there, also inside an episode (:mod:`sb3_denfac.common.budget`).
+    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): bad inputs raise errors that name them.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -143,11 +137,10 @@ class DENFAC(
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
-    :param policy_kwargs: policy keyword arguments: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper
-        ``dict(pi=[20], qf=[50, 7])``), ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's;
-        "paper": N(0, 0.01^2)), ``n_critics`` (paper 1; 2: targets from the minimum of two critics, clipped double Q),
-        ``bn_momentum``, ``activation_fn`` (see :class:`DENFACPolicy`); the keys it leaves out take
-        :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
+    :param policy_kwargs: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper ``dict(pi=[20], qf=[50, 7])``),
+        ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's; "paper": N(0, 0.01^2)), ``n_critics``
+        (default 2: targets from their minimum; paper 1), ``bn_momentum``, ``activation_fn`` (:class:`DENFACPolicy`);
+        keys left out take :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
