@@ -10,7 +10,10 @@ import torch as th
 
 
 class Diagnostics:
-    """Critic-fit measurements on the buffer after an update (eval mode, no gradient)."""
+    """Critic-fit measurements on the buffer after an update (eval mode, no gradient).
+
+    Q is ``model.critic``, i.e. Q_1 with ``n_critics`` > 1, and so are the one-step targets y here: for several critics
+    ``fit_r2`` is Q_1's fit to its own one-step targets, not to the minimum the update fits it to."""
 
     def __init__(self, every: int = 5):
         self.every = every

@@ -84,15 +84,18 @@ class DENFACCritic(BaseModel):
         """Q_1, ..., Q_n (SB3's ``ContinuousCritic.q_networks``)."""
         return [self.qf, *self.twin_qfs]
 
+    def q_inputs(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """What every Q network reads: the features of s and the scaled action, concatenated."""
+        return th.cat([self.extract_features(obs, self.features_extractor), actions], dim=1)
+
     def all_q(self, obs: th.Tensor, actions: th.Tensor) -> list[th.Tensor]:
         """Q_1(s, a), ..., Q_n(s, a), each of shape (N, 1)."""
-        inputs = th.cat([self.extract_features(obs, self.features_extractor), actions], dim=1)
+        inputs = self.q_inputs(obs, actions)
         return [q_net(inputs) for q_net in self.q_networks]
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q_1(s, a), shape (N, 1): the value the actor ascends (SB3's ``q1_forward``)."""
-        features = self.extract_features(obs, self.features_extractor)
-        return self.qf(th.cat([features, actions], dim=1))
+        return self.qf(self.q_inputs(obs, actions))
 
     def target_q(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """min_j Q_j(s, a), shape (N, 1): the bootstrap value of the targets of eq. (4) (clipped double Q)."""
@@ -167,7 +170,6 @@ class DENFACPolicy(BasePolicy):
         self.sigma = sigma
         self.actor_learning_rate = actor_learning_rate
         self.critic_learning_rate = critic_learning_rate
-        self.n_critics = n_critics
         common = dict(
             observation_space=self.observation_space,
             action_space=self.action_space,
@@ -209,7 +211,7 @@ class DENFACPolicy(BasePolicy):
                 optimizer_kwargs=self.optimizer_kwargs,
                 features_extractor_class=self.features_extractor_class,
                 features_extractor_kwargs=self.features_extractor_kwargs,
-                n_critics=self.n_critics,
+                n_critics=self.critic.n_critics,  # validated by the critic
             )
         )
         return data
