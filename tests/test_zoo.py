@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import argparse
 import os
+import sqlite3
 import subprocess
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import optuna
 import pytest
-import sqlalchemy
 import torch as th
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
@@ -165,6 +166,16 @@ def test_optimize_on_sqlite_resumes_the_study(tmp_path: Path) -> None:
     assert policy_kwargs["net_arch"] == zoo_samplers.ACTOR_ARCHS[trials[1].params["actor_arch"]]
 
 
+def _completed_trial_count(db: Path) -> int:
+    """Completed trials in an optuna SQLite file, read without writing: ``optuna.load_study`` would create missing
+    tables and race the tuner that is creating them (``IntegrityError`` on ``alembic_version``)."""
+    try:
+        with closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=1.0)) as connection:
+            return connection.execute("SELECT COUNT(*) FROM trials WHERE state = 'COMPLETE'").fetchone()[0]
+    except sqlite3.Error:
+        return 0  # no file or tables yet, or the tuner holds a write lock
+
+
 def test_killed_optimisation_keeps_completed_trials(tmp_path: Path) -> None:
     """SIGKILL a tuning process after its first completed trial; rerunning the same command continues the study."""
     logs = tmp_path / "logs"
@@ -179,19 +190,15 @@ def test_killed_optimisation_keeps_completed_trials(tmp_path: Path) -> None:
     )
     try:
         deadline = time.monotonic() + 180
-        completed: list[optuna.trial.FrozenTrial] = []
-        while not completed and time.monotonic() < deadline and process.poll() is None:
+        while time.monotonic() < deadline and process.poll() is None:
             time.sleep(1.0)
-            if not (logs / "optuna.db").exists():
-                continue
-            try:
-                completed = _study(logs, OPTIMIZE_ALGO).get_trials(states=(optuna.trial.TrialState.COMPLETE,))
-            except (KeyError, sqlalchemy.exc.OperationalError):
-                pass  # the study or its tables are being created
+            if _completed_trial_count(logs / "optuna.db"):
+                break
     finally:
         process.kill()
         process.wait()
-    assert completed, "the tuning process completed no trial"
+    assert _completed_trial_count(logs / "optuna.db"), "the tuning process completed no trial"
+    completed = _study(logs, OPTIMIZE_ALGO).get_trials(states=(optuna.trial.TrialState.COMPLETE,))
 
     zoo.main([*argv, "--n-trials", "1", "--seed", "2"])
     trials = _study(logs, OPTIMIZE_ALGO).get_trials(states=(optuna.trial.TrialState.COMPLETE,))
