@@ -6,7 +6,10 @@ zoo's ``--trial-id`` path (which calls the converter on a stored trial's params)
 that trial trained with.
 
 Search spaces follow the dimensions of the paper's Figure 5 (learning rates alpha_a / alpha_c, inverting gradient,
-mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes.
+mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes;
+DENFAC's also offers the two stability options of its default configuration (``actor_proximal`` lambda, 0 = the
+paper's plain ascent, and ``n_critics``, 1 = the paper's single critic), since neither is right everywhere (one critic
+suits sparse rewards: ``benchmarks/results/denfac_ablation/`` section 8).
 gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
 ``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
 
@@ -61,13 +64,16 @@ def _copy_except(params: dict[str, Any], *names: str) -> dict[str, Any]:
 
 
 def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
-    hyperparams = _copy_except(params, "actor_arch", "critic_arch")
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "n_critics")
     hyperparams["policy_kwargs"] = _policy_kwargs(params)
+    if "n_critics" in params:  # a policy keyword argument (the critic), as in SB3's TD3 and SAC
+        hyperparams["policy_kwargs"]["n_critics"] = params["n_critics"]
     return hyperparams
 
 
 def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes."""
+    """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes, the
+    proximal actor's lambda and the number of critics."""
     params = {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
@@ -80,6 +86,8 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
+        "actor_proximal": trial.suggest_categorical("actor_proximal", [0.0, 0.3, 1.0, 3.0]),
+        "n_critics": trial.suggest_categorical("n_critics", [1, 2]),
     }
     return _sampled(trial, convert_denfac_params(params))
 

@@ -220,14 +220,33 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
         trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry_policy_kwargs)
         sampled = zoo_samplers.SAMPLERS[algo](trial, 1, 1, {})
         assert "train_freq" not in sampled
-        assert {k: v for k, v in sampled["policy_kwargs"].items() if k != "net_arch"} == {
-            k: v for k, v in entry_policy_kwargs.items() if k != "net_arch"
-        }
         converted = zoo_samplers.CONVERTERS[algo](trial.params)
+        tuned = set(converted["policy_kwargs"])  # net_arch, and DENFAC's n_critics
+        assert {k: v for k, v in sampled["policy_kwargs"].items() if k not in tuned} == {
+            k: v for k, v in entry_policy_kwargs.items() if k not in tuned
+        }
         assert zoo_samplers.with_entry_policy_kwargs(converted, entry_policy_kwargs) == sampled
         merged = {**entry, **sampled}
         zoo.validate_entry(algo, merged, env_id=ENV)
         zoo.make_model(algo, ENV, merged, device="cpu").get_env().close()  # the values are usable too
+
+
+def test_denfac_sampler_tunes_the_stability_options() -> None:
+    """The DENFAC sampler offers both values of n_critics and the plain ascent (lambda 0) besides proximal actors, and
+    the model the zoo builds from a trial has what was sampled."""
+    entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("denfac")), ENV)
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
+    seen: set[tuple[int, bool]] = set()
+    for _ in range(12):
+        trial = study.ask()
+        trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry["policy_kwargs"])
+        sampled = zoo_samplers.sample_denfac_params(trial, 1, 1, {})
+        model = zoo.make_model("denfac", ENV, {**entry, **sampled}, device="cpu")
+        assert len(model.critic.q_networks) == trial.params["n_critics"]
+        assert model.actor_proximal == trial.params["actor_proximal"]
+        seen.add((trial.params["n_critics"], trial.params["actor_proximal"] > 0))
+        model.get_env().close()
+    assert seen == {(1, False), (1, True), (2, False), (2, True)}
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)
