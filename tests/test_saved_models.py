@@ -61,3 +61,4 @@ def test_v0_2_denfac_keeps_the_plain_actor_update() -> None:
     model = DENFAC.load(DATA / "denfac_v0.2_pendulum.zip", device="cpu")
     assert model.actor_proximal == 0.0 and DENFAC("MlpPolicy", "Pendulum-v1").actor_proximal == 1.0
     assert model.critic.n_critics == 1 and DENFAC("MlpPolicy", "Pendulum-v1").critic.n_critics == 2
+    assert model.update_to_data_ratio is None and model.gradient_steps == -1  # 0.2 saved gradient_steps=1

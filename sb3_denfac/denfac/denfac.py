@@ -30,7 +30,7 @@ from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.fast import FastUpdater, supported_networks
-from sb3_denfac.denfac.options import check_options, fast_refusal
+from sb3_denfac.denfac.options import check_options, fast_refusal, fitted_iterations
 from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.presets import DEFAULT_POLICY_KWARGS
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
@@ -133,6 +133,8 @@ class DENFAC(
     :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
     :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
+    :param update_to_data_ratio: rho (:mod:`~.options`): the update after n new transitions runs
+        min(K, ceil(rho n / critic_steps)) fitted iterations; None (default, the paper): K at every update
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -180,6 +182,7 @@ class DENFAC(
         priority_beta: float = 0.4,
         priority_eps: float = 1e-3,
         actor_proximal: float = 1.0,
+        update_to_data_ratio: float | None = None,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -193,6 +196,7 @@ class DENFAC(
         check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True)
         check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
         check_number("critic_steps", critic_steps, minimum=1, integer=True)
+        check_number("update_to_data_ratio", update_to_data_ratio, minimum=0.0, exclusive_minimum=True, none_ok=True)
         check_choice("weighting", weighting, WEIGHTINGS)
         check_number("batch_size", batch_size, minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
         check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
@@ -218,7 +222,7 @@ class DENFAC(
             tau=1.0,  # no target networks in DENFAC
             gamma=gamma,
             train_freq=(1, "episode"),
-            gradient_steps=1,  # one Algorithm 1 update per episode
+            gradient_steps=-1,  # SB3 then passes train() the steps collected; one Algorithm 1 update per episode
             action_noise=None,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
@@ -242,6 +246,7 @@ class DENFAC(
         self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
+        self.update_to_data_ratio = update_to_data_ratio
         self.actor_steps = actor_steps
         self.reset_critic = reset_critic
         self.reset_actor = reset_actor
@@ -263,6 +268,7 @@ class DENFAC(
         if self.update_path == "compiled":  # a model saved by sb3-denfac 0.1
             warnings.warn("update_path='compiled' was removed in sb3-denfac 0.2: this model now updates with 'fast'")
             self.update_path = "fast"
+        self.gradient_steps = -1  # files saved before update_to_data_ratio say 1 (one update per episode, as now)
         if self.replay_buffer_class is None:
             self.replay_buffer_class = DENFACReplayBuffer
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
@@ -301,13 +307,13 @@ class DENFAC(
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
-        """Algorithm 1 over the whole replay buffer, ``gradient_steps`` times (DENFAC calls it once per episode)."""
+        """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of transitions
+        collected since the last one (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
-        for _ in range(gradient_steps):
-            self._update()
+        self._update(fitted_iterations(self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio, gradient_steps))
 
     def _fit_settings(self) -> FitSettings:
         """This model's :class:`FitSettings`; a ValueError if ``update_path="fast"`` cannot carry them out."""
@@ -329,16 +335,16 @@ class DENFAC(
             return AutogradUpdater(self.policy, settings)
         return FastUpdater(self.policy, settings, *layers)
 
-    def _update(self) -> None:
-        """One end-of-episode update: Algorithm 1 with K fitted iterations over the whole buffer D."""
-        start = time.perf_counter()
+    def _update(self, n_iterations: int | None = None) -> None:
+        """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""
+        start, n_iterations = time.perf_counter(), n_iterations or self.n_fitted_iterations
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
         updater = self._make_updater()
         critic_loss = actor_objective = th.zeros(())
-        for _ in range(self.n_fitted_iterations):
+        for _ in range(n_iterations):
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
                 next_actions = updater.actor(next_obs).clamp(-1.0, 1.0)
@@ -362,6 +368,7 @@ class DENFAC(
         self.logger.record("train/update_time", time.perf_counter() - start)
         self.logger.record("train/buffer_size", obs.shape[0])
         self.logger.record("train/n_updates", self._n_updates)
+        self.logger.record("train/fitted_iterations", n_iterations)
 
     def _importance_weights(
         self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor

@@ -1,4 +1,4 @@
-"""The two fixes the paper names as future work as DENFAC options, both off by default.
+"""The two fixes the paper names as future work as DENFAC options, and a third the diagnosis suggested.
 
 The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
 as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
@@ -28,10 +28,19 @@ uniform ones); ``"both"`` also draws the actor's from the same P and ascends 1/B
 with g_i = dQ/da at (s_i, pi(s_i)) of eq. (5), after inverting gradients if ``inverting_gradients`` (and times w_i
 with ``prioritized="both"``). The Q term has unit action gradient per sample on average, so the action change at which
 the two terms balance is about 1/(2 lambda) in the scaled action space [-1, 1], whatever the scale of the rewards.
+
+**Update-to-data ratio** (``update_to_data_ratio`` = rho, off by default). Algorithm 1 runs K fitted iterations at every
+episode end, i.e. K x ``critic_steps`` critic steps whatever the episode's length: many steps per new transition after
+a short episode. With rho, the update after n new transitions (SB3's ``gradient_steps=-1`` count) runs
+
+    K_e = min(K, ceil(rho n / critic_steps))   fitted iterations,
+
+i.e. about rho critic steps per new transition, never more than Algorithm 1's K iterations.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import torch as th
@@ -58,6 +67,13 @@ def check_options(
             "got batch_size=None (full batch)"
         )
     return prioritized, alpha, beta, eps, proximal
+
+
+def fitted_iterations(n_fitted_iterations: int, critic_steps: int, ratio: float | None, n_new: int) -> int:
+    """K_e of the update after ``n_new`` new transitions (module docstring); ``ratio`` None: always K."""
+    if ratio is None:
+        return n_fitted_iterations
+    return max(1, min(n_fitted_iterations, math.ceil(ratio * n_new / critic_steps)))
 
 
 def autograd_only(prioritized: str) -> list[str]:

@@ -1,0 +1,64 @@
+"""DENFAC's ``update_to_data_ratio`` (:mod:`sb3_denfac.denfac.options`): the update after n new transitions runs
+min(K, ceil(rho n / critic_steps)) fitted iterations; counted on the critics' Adam steps, on both updaters, with a
+budget that ends inside an episode; validation, save/load, and a learning test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sb3_denfac.denfac import DENFAC
+from sb3_denfac.denfac.options import fitted_iterations
+
+SMALL = dict(n_fitted_iterations=4, critic_steps=5, actor_steps=5, seed=1)
+
+
+def _critic_adam_steps(model: DENFAC) -> list[int]:
+    return [int(state["step"]) for state in model.critic.optimizer.state.values()]
+
+
+@pytest.mark.parametrize(
+    ("ratio", "n_new", "expected"),
+    [(None, 1, 10), (None, 1000, 10), (1.0, 10, 2), (1.0, 50, 10), (1.0, 500, 10), (1.0, 1, 1), (0.01, 3, 1), (2.5, 8, 4)],
+)
+def test_fitted_iterations(ratio, n_new, expected):
+    """K = 10, 5 critic steps per iteration: about rho critic steps per new transition, at least 1, at most K."""
+    assert fitted_iterations(10, 5, ratio, n_new) == expected
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_updates_scale_with_the_new_transitions(target_action_env, update_path):
+    """Episodes of 10 steps, rho = 1, 5 critic steps: 2 fitted iterations (10 critic steps) per episode instead of K = 4;
+    a budget ending 5 steps into the third episode updates on those 5 with 1 iteration."""
+    model = DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=1.0, update_path=update_path, **SMALL)
+    model.learn(25)
+    assert model._n_updates == 3
+    assert set(_critic_adam_steps(model)) == {(2 + 2 + 1) * 5}
+    paper_count = DENFAC("MlpPolicy", target_action_env(), update_path=update_path, **SMALL).learn(25)
+    assert set(_critic_adam_steps(paper_count)) == {3 * 4 * 5}  # None: K iterations at every update
+
+
+@pytest.mark.parametrize("value", [0, -1.0, "1", float("nan")])
+def test_invalid_update_to_data_ratio(target_action_env, value):
+    with pytest.raises(ValueError, match="update_to_data_ratio"):
+        DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=value)
+
+
+def test_save_load_keeps_the_ratio(tmp_path, target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=1.0, **SMALL).learn(20)
+    model.save(tmp_path / "model.zip")
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
+    assert loaded.update_to_data_ratio == 1.0
+    loaded.learn(10, reset_num_timesteps=False)
+    assert set(_critic_adam_steps(loaded)) == {3 * 2 * 5}
+
+
+def test_update_to_data_ratio_learns_target_action(target_action_env):
+    """With half of Algorithm 1's iterations per 10-step episode the actor still moves to the rewarded action."""
+    env = target_action_env()
+    model = DENFAC("MlpPolicy", env, update_to_data_ratio=1.0, gamma=0.9, **SMALL)
+    obs = np.stack([env.observation_space.sample() for _ in range(64)])
+    start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    model.learn(300)
+    end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    assert end < 0.1 and end < start / 2, (start, end)
