@@ -207,7 +207,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default+per-both"] = merge(GOOD, dict(prioritized="both"))
     c["default+proximal"] = merge(GOOD, dict(actor_proximal=1.0))
     c["default+proximal+n_critics2"] = merge(c["default+proximal"], dict(policy_kwargs=dict(n_critics=2)))  # library cdq
-    # 0.4's default with about 2.5 critic steps per new transition (K = 10 x 50 steps after 200+ steps, fewer before)
+    # 0.4's default with about 2.5 critic steps per collected step (all K = 10 iterations after 181+ steps, fewer before)
     c["default04+utd2.5"] = merge(c["default+proximal+n_critics2"], dict(update_to_data_ratio=2.5))
     return c
 

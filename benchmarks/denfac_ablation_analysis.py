@@ -21,6 +21,7 @@ DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot
 HELD_OUT = ("hopper", "reacher")  # envs not used to choose the 0.3 settings (denfac_ablation.ENVS)
 DEFAULT_EPISODES |= dict.fromkeys(HELD_OUT, 100)
 TWIN = "default+proximal+n_critics2"  # the library's clipped double Q (n_critics=2) on 0.3's default
+UTD = "default04+utd2.5"  # 0.4's default with update_to_data_ratio=2.5
 THRESH = {"pendulum": -200.0, "halfcheetah": 50.0, "cartpole": -500.0, "invpendulum": 999.0, "acrobot": None}
 
 
@@ -108,14 +109,14 @@ def to_markdown(df: pd.DataFrame) -> str:
 
 def full_budget_options(runs: pd.DataFrame) -> list[str]:
     """Library default (0.2, ``default``) against the proximal actor (0.3's default), and the latter with 256-256
-    networks or clipped double-Q (prototype ``cdq``, library :data:`TWIN`), at each env's full budget; :data:`HELD_OUT`
-    envs check a choice, not its basis."""
+    networks or clipped double-Q (prototype ``cdq``, library :data:`TWIN`), and :data:`TWIN` with a data-proportional
+    update (:data:`UTD`), at each env's full budget; :data:`HELD_OUT` envs check a choice, not its basis."""
     out = []
     full_budgets = {"pendulum": 40, "halfcheetah": 100, "cartpole": 100, "invpendulum": 100, "acrobot": 100}
     full_budgets |= dict.fromkeys(HELD_OUT, 100)
     for env, budget in full_budgets.items():
         suffix = "" if DEFAULT_EPISODES[env] == budget else f" ({budget} ep)"
-        names = ("default", "default+proximal", "default+proximal+nets256", "default+proximal+cdq", TWIN)
+        names = ("default", "default+proximal", "default+proximal+nets256", "default+proximal+cdq", TWIN, UTD)
         configs = [f"{name}{suffix}" for name in names]
         if ((runs.env == env) & runs.config.isin(configs)).any():
             held_out = (

@@ -8,12 +8,13 @@ that trial trained with.
 Search spaces follow the dimensions of the paper's Figure 5 (learning rates alpha_a / alpha_c, inverting gradient,
 mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes;
 DENFAC's also offers the two stability options of its default configuration (``actor_proximal`` lambda, 0 = the
-paper's plain ascent, and ``n_critics``, 1 = the paper's single critic), since neither is right everywhere (one critic
-suits sparse rewards: ``benchmarks/results/denfac_ablation/`` section 8).
+paper's plain ascent of eq. (5), and ``n_critics``, 1 = the paper's single critic in the targets of eq. (4)), since
+neither is right everywhere: the minimum over critics also lowers the value of a sparse reward.
 gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
 ``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
 
-The converters return only what was sampled (``policy_kwargs`` holds just the sampled ``net_arch``). The zoo would let
+The converters return only what was sampled (``policy_kwargs`` holds just the sampled ``net_arch``, and DENFAC's
+``n_critics``). The zoo would let
 that replace the YAML entry's ``policy_kwargs`` (batch norm, init, activation); :func:`with_entry_policy_kwargs` merges
 it over them instead. The samplers read the entry's ``policy_kwargs`` from the trial's user attribute
 :data:`ENTRY_POLICY_KWARGS`, which ``sb3_denfac.zoo``'s ExperimentManager sets before sampling (so the study records

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.options import fitted_iterations
@@ -24,6 +25,7 @@ def _critic_adam_steps(model: DENFAC) -> list[int]:
 def test_fitted_iterations(ratio, n_new, expected):
     """K = 10, 5 critic steps per iteration: about rho critic steps per new transition, at least 1, at most K."""
     assert fitted_iterations(10, 5, ratio, n_new) == expected
+    assert fitted_iterations(10, 7, 0.07, 100) == 1  # exactly one iteration's steps, not 2 from float rounding
 
 
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
@@ -38,6 +40,14 @@ def test_updates_scale_with_the_new_transitions(target_action_env, update_path):
     assert set(_critic_adam_steps(paper_count)) == {3 * 4 * 5}  # None: K iterations at every update
 
 
+def test_warm_up_steps_are_not_counted(target_action_env):
+    """learning_starts = 15: the first update follows the second 10-step episode and counts its 10 steps only."""
+    model = DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=1.0, learning_starts=15, **SMALL)
+    model.learn(30)
+    assert model._n_updates == 2
+    assert set(_critic_adam_steps(model)) == {2 * 2 * 5}
+
+
 @pytest.mark.parametrize("value", [0, -1.0, "1", float("nan")])
 def test_invalid_update_to_data_ratio(target_action_env, value):
     with pytest.raises(ValueError, match="update_to_data_ratio"):
@@ -47,8 +57,10 @@ def test_invalid_update_to_data_ratio(target_action_env, value):
 def test_save_load_keeps_the_ratio(tmp_path, target_action_env):
     model = DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=1.0, **SMALL).learn(20)
     model.save(tmp_path / "model.zip")
+    data, _, _ = load_from_zip_file(tmp_path / "model.zip", device="cpu", load_data=True)
+    assert "gradient_steps" not in data  # always -1 here; an older sb3-denfac would read -1 as one update per step
     loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
-    assert loaded.update_to_data_ratio == 1.0
+    assert loaded.update_to_data_ratio == 1.0 and loaded.gradient_steps == -1
     loaded.learn(10, reset_num_timesteps=False)
     assert set(_critic_adam_steps(loaded)) == {3 * 2 * 5}
 

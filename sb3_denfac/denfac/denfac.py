@@ -23,6 +23,7 @@ from sb3_denfac.common.checks import (
     check_gamma,
     check_learning_rate,
     check_number,
+    check_positive,
     check_sigma,
 )
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
@@ -133,7 +134,7 @@ class DENFAC(
     :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
     :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
-    :param update_to_data_ratio: rho (:mod:`~.options`): the update after n new transitions runs
+    :param update_to_data_ratio: rho (:mod:`~.options`): the update after an episode of n steps runs
         min(K, ceil(rho n / critic_steps)) fitted iterations; None (default, the paper): K at every update
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
@@ -196,7 +197,6 @@ class DENFAC(
         check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True)
         check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
         check_number("critic_steps", critic_steps, minimum=1, integer=True)
-        check_number("update_to_data_ratio", update_to_data_ratio, minimum=0.0, exclusive_minimum=True, none_ok=True)
         check_choice("weighting", weighting, WEIGHTINGS)
         check_number("batch_size", batch_size, minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
         check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
@@ -246,7 +246,7 @@ class DENFAC(
         self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.n_fitted_iterations = n_fitted_iterations
         self.critic_steps = critic_steps
-        self.update_to_data_ratio = update_to_data_ratio
+        self.update_to_data_ratio = check_positive("update_to_data_ratio", update_to_data_ratio, none_ok=True)
         self.actor_steps = actor_steps
         self.reset_critic = reset_critic
         self.reset_actor = reset_actor
@@ -307,8 +307,8 @@ class DENFAC(
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
-        """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of transitions
-        collected since the last one (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
+        """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of steps of the
+        rollout just collected (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
@@ -337,7 +337,8 @@ class DENFAC(
 
     def _update(self, n_iterations: int | None = None) -> None:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""
-        start, n_iterations = time.perf_counter(), n_iterations or self.n_fitted_iterations
+        start = time.perf_counter()
+        n_iterations = self.n_fitted_iterations if n_iterations is None else n_iterations
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
@@ -401,7 +402,8 @@ class DENFAC(
         )
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "actor", "critic", "_last_update_stats"]
+        # gradient_steps: always -1 (_setup_model); a saved -1 would make sb3-denfac <= 0.4.0 update once per step
+        return [*super()._excluded_save_params(), "actor", "critic", "_last_update_stats", "gradient_steps"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "actor.optimizer", "critic.optimizer"], []

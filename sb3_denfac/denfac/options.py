@@ -1,4 +1,4 @@
-"""The two fixes the paper names as future work as DENFAC options, and a third the diagnosis suggested.
+"""The two fixes the paper names as future work as DENFAC options, and a bound on updates per collected step.
 
 The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
 as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
@@ -31,11 +31,12 @@ the two terms balance is about 1/(2 lambda) in the scaled action space [-1, 1], 
 
 **Update-to-data ratio** (``update_to_data_ratio`` = rho, off by default). Algorithm 1 runs K fitted iterations at every
 episode end, i.e. K x ``critic_steps`` critic steps whatever the episode's length: many steps per new transition after
-a short episode. With rho, the update after n new transitions (SB3's ``gradient_steps=-1`` count) runs
+a short episode. With rho, the update after an episode (rollout) of n steps (SB3's ``gradient_steps=-1`` count,
+``episode_timesteps``: warm-up rollouts without an update are not carried over) runs
 
     K_e = min(K, ceil(rho n / critic_steps))   fitted iterations,
 
-i.e. about rho critic steps per new transition, never more than Algorithm 1's K iterations.
+i.e. about rho critic steps per collected step, never more than Algorithm 1's K iterations.
 """
 
 from __future__ import annotations
@@ -69,11 +70,12 @@ def check_options(
     return prioritized, alpha, beta, eps, proximal
 
 
-def fitted_iterations(n_fitted_iterations: int, critic_steps: int, ratio: float | None, n_new: int) -> int:
-    """K_e of the update after ``n_new`` new transitions (module docstring); ``ratio`` None: always K."""
+def fitted_iterations(n_fitted_iterations: int, critic_steps: int, ratio: float | None, n_steps: int) -> int:
+    """K_e of the update after a rollout of ``n_steps`` steps (module docstring); ``ratio`` None: always K."""
     if ratio is None:
         return n_fitted_iterations
-    return max(1, min(n_fitted_iterations, math.ceil(ratio * n_new / critic_steps)))
+    wanted = round(ratio * n_steps / critic_steps, 9)  # 0.07 * 100 / 7 is 1.0000000000000002 in floats
+    return max(1, min(n_fitted_iterations, math.ceil(wanted)))
 
 
 def autograd_only(prioritized: str) -> list[str]:
