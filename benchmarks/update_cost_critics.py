@@ -13,8 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -22,6 +20,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch as th
+from figure3_run import git_state, machine_info
 
 from sb3_denfac import DENFAC
 
@@ -64,16 +63,16 @@ def main() -> None:
     parser.add_argument("--output", default=str(RESULTS / "update_cost_critics"))
     args = parser.parse_args()
     th.set_num_threads(1)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    meta = dict(commit=commit, machine=platform.processor() or platform.machine(), nproc=os.cpu_count())
-    meta |= dict(load_average_start=os.getloadavg(), torch_threads=1, repeats=args.repeats, episodes=args.episodes)
+    meta = dict(git=git_state(), machine=machine_info(), load_average_start=os.getloadavg())
+    meta |= dict(repeats=args.repeats, episodes=args.episodes)
     with tempfile.TemporaryDirectory() as folder:
         rows = [measure(env_id, args.episodes, args.repeats, Path(folder)) for env_id in args.envs]
     meta["load_average_end"] = os.getloadavg()
     Path(args.output + ".json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=2))
     lines = [
         "# One end-of-episode update of the default DENFAC: one critic against two (`update_cost_critics.py`)\n",
-        f"Commit {commit}, {meta['nproc']} cores, load average {meta['load_average_start'][0]:.1f} at the start and "
+        f"Commit {meta['git'].get('commit', 'unknown')[:7]}, {meta['machine']['cpu_model']}, {meta['machine']['nproc']} "
+        f"cores, load average {meta['load_average_start'][0]:.1f} at the start and "
         f"{meta['load_average_end'][0]:.1f} at the end, one torch thread, fast updater, buffer of a default (two-critic) "
         f"run after {args.episodes} episodes, median CPU s over {args.repeats} interleaved repeats.\n",
         "| env | transitions in D | one critic (s) | two critics (s) | ratio |",

@@ -19,13 +19,22 @@ def _critic_adam_steps(model: DENFAC) -> list[int]:
 
 
 @pytest.mark.parametrize(
-    ("ratio", "n_new", "expected"),
-    [(None, 1, 10), (None, 1000, 10), (1.0, 10, 2), (1.0, 50, 10), (1.0, 500, 10), (1.0, 1, 1), (0.01, 3, 1), (2.5, 8, 4)],
+    ("critic_steps", "ratio", "n_new", "expected"),
+    [
+        (5, None, 1, 10),
+        (5, None, 1000, 10),
+        (5, 1.0, 10, 2),
+        (5, 1.0, 50, 10),
+        (5, 1.0, 500, 10),
+        (5, 1.0, 1, 1),
+        (5, 0.01, 3, 1),
+        (5, 2.5, 8, 4),
+        (7, 0.07, 100, 1),  # exactly one iteration's steps, not 2 from float rounding (0.07 * 100 / 7 > 1 in floats)
+    ],
 )
-def test_fitted_iterations(ratio, n_new, expected):
-    """K = 10, 5 critic steps per iteration: about rho critic steps per new transition, at least 1, at most K."""
-    assert fitted_iterations(10, 5, ratio, n_new) == expected
-    assert fitted_iterations(10, 7, 0.07, 100) == 1  # exactly one iteration's steps, not 2 from float rounding
+def test_fitted_iterations(critic_steps, ratio, n_new, expected):
+    """K = 10: about rho critic steps per new transition, at least 1, at most K."""
+    assert fitted_iterations(10, critic_steps, ratio, n_new) == expected
 
 
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
