@@ -24,11 +24,11 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.monitor import load_results
 
-from sb3_denfac import zoo_config
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback, ProgressBarCallback
 from sb3_denfac.common.performance import best_so_far
 from sb3_denfac.envs import PAPER_PERFORMANCE_KEY
 from sb3_denfac.envs.facts import env_facts
+from sb3_denfac.zoo import config as zoo_config
 
 
 def plot_learning_curve(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sqlite3
 import subprocess
@@ -20,7 +21,8 @@ import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from sb3_denfac import zoo, zoo_samplers
+from sb3_denfac import zoo
+from sb3_denfac.zoo import samplers as zoo_samplers
 
 ENV = "sb3_denfac/ContinuousCartPole-v0"  # the cheapest of the paper's envs
 ENV_FOLDER = ENV.replace("/", "-")
@@ -127,7 +129,7 @@ def test_record_video_writes_an_mp4(tmp_path: Path, env_id: str, monkeypatch: py
 
 
 def test_record_video_without_the_extra_names_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(zoo.importlib.util, "find_spec", lambda name: None if name == "pygame" else object())  # absent
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None if name == "pygame" else object())  # absent
     with pytest.raises(SystemExit, match=r"record_video needs pygame .*sb3-denfac\[video\]"):
         zoo.main(["record_video", "--algo", "cmaes", "--env", ENV, "-f", str(tmp_path)])
 

@@ -77,7 +77,7 @@ def register() -> None:
     from stable_baselines3 import DDPG as SB3DDPG
 
     import sb3_denfac  # noqa: F401  (registers the environments)
-    from sb3_denfac import zoo_samplers
+    from sb3_denfac.zoo import samplers as zoo_samplers
 
     rl_zoo3.ALGOS.setdefault("sb3_ddpg", SB3DDPG)
     HYPERPARAMS_SAMPLER.setdefault("sb3_ddpg", HYPERPARAMS_SAMPLER["ddpg"])
@@ -168,7 +168,7 @@ def _zoo_preprocess(algo: str, env_id: str, hyperparams: dict[str, Any], seed: i
     missing = [name for name in ZOO_PREPROCESSING_STEPS if not hasattr(ExperimentManager, name)]
     if missing:
         raise ZooConfigError(
-            f"rl_zoo3 {rl_zoo3.__version__} has no ExperimentManager.{', '.join(missing)}, which sb3_denfac.zoo_config "
+            f"rl_zoo3 {rl_zoo3.__version__} has no ExperimentManager.{', '.join(missing)}, which sb3_denfac.zoo.config "
             "uses to build a model from a YAML entry; install a supported rl_zoo3 (constraints-dev.txt: 2.9.2)"
         )
     manager = ExperimentManager(argparse.Namespace(), algo, env_id, log_folder=os.devnull, seed=seed, verbose=0)

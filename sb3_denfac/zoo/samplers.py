@@ -17,7 +17,7 @@ The converters return only what was sampled (``policy_kwargs`` holds just the sa
 ``n_critics``). The zoo would let
 that replace the YAML entry's ``policy_kwargs`` (batch norm, init, activation); :func:`with_entry_policy_kwargs` merges
 it over them instead. The samplers read the entry's ``policy_kwargs`` from the trial's user attribute
-:data:`ENTRY_POLICY_KWARGS`, which ``sb3_denfac.zoo``'s ExperimentManager sets before sampling (so the study records
+:data:`ENTRY_POLICY_KWARGS`, which ``sb3_denfac.zoo.cli``'s ExperimentManager sets before sampling (so the study records
 them too); that manager applies the same merge to a converted ``--trial-id``.
 """
 
@@ -195,7 +195,7 @@ def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
     return _sampled(trial, convert_cmaes_params(params))
 
 
-#: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.register`.
+#: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.config.register`.
 SAMPLERS = {
     "denfac": sample_denfac_params,
     "ddpg": sample_ddpg_params,

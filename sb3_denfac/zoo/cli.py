@@ -7,7 +7,7 @@ Usage (``sb3-denfac-zoo`` is the same as ``python -m sb3_denfac.zoo``)::
     python -m sb3_denfac.zoo enjoy --algo denfac --env sb3_denfac/ContinuousCartPole-v0 -f logs/
     python -m sb3_denfac.zoo record_video --algo denfac --env sb3_denfac/ContinuousCartPole-v0 -f logs/
 
-Nothing of the zoo is rebuilt: :func:`~sb3_denfac.zoo_config.register` adds this package's algorithms and samplers to
+Nothing of the zoo is rebuilt: :func:`~sb3_denfac.zoo.config.register` adds this package's algorithms and samplers to
 the zoo's tables, then the command goes to ``rl_zoo3.train.train``, ``rl_zoo3.enjoy.enjoy`` or the
 ``rl_zoo3.record_video`` script with the same command line; the zoo parses it. ``train`` runs with
 :class:`CheckedExperimentManager`, the zoo's ExperimentManager with what the zoo cannot guess:
@@ -17,9 +17,9 @@ the zoo's tables, then the command goes to ``rl_zoo3.train.train``, ``rl_zoo3.en
 - with ``-optimize`` and no ``--storage``, the study is kept in ``sqlite:///<log-folder>/optuna.db`` under the study
   name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study;
   ``--trial-id`` reads the same study by default;
-- the selected YAML entry (after ``-params`` overrides) is checked (:func:`~sb3_denfac.zoo_config.validate_entry`), so
-  a typo fails with a clear :class:`~sb3_denfac.zoo_config.ZooConfigError` before any log folder is created;
-- this package's samplers keep the entry's ``policy_kwargs`` (see :mod:`sb3_denfac.zoo_samplers`).
+- the selected YAML entry (after ``-params`` overrides) is checked (:func:`~sb3_denfac.zoo.config.validate_entry`), so
+  a typo fails with a clear :class:`~sb3_denfac.zoo.config.ZooConfigError` before any log folder is created;
+- this package's samplers keep the entry's ``policy_kwargs`` (see :mod:`sb3_denfac.zoo.samplers`).
 
 Before the zoo parses the command line, :func:`prepare_train_args` adds ``--num-threads 1`` and the default
 ``--algo``/``--env`` and checks the env id (the zoo's own check names no package env).
@@ -44,47 +44,18 @@ from typing import Any
 import optuna
 from rl_zoo3.exp_manager import ExperimentManager
 
-from sb3_denfac import zoo_samplers
-from sb3_denfac.zoo_config import (
+from sb3_denfac.zoo import samplers as zoo_samplers
+from sb3_denfac.zoo.config import (
     ALGORITHMS,
-    HYPERPARAMS_DIR,
-    PACKAGE_ENV_IDS,
     ZooConfigError,
-    algorithm_class,
     check_env_id,
     check_env_keys,
     default_config_path,
     load_config_file,
-    load_hyperparams,
-    make_model,
     register,
     select_entry,
-    validate_config_file,
     validate_entry,
 )
-
-__all__ = [
-    "ALGORITHMS",
-    "DEFAULT_ALGO",
-    "DEFAULT_ENV",
-    "DEFAULT_NUM_THREADS",
-    "HYPERPARAMS_DIR",
-    "PACKAGE_ENV_IDS",
-    "CheckedExperimentManager",
-    "ZooConfigError",
-    "algorithm_class",
-    "check_env_id",
-    "default_config_path",
-    "load_config_file",
-    "load_hyperparams",
-    "main",
-    "make_model",
-    "prepare_train_args",
-    "register",
-    "select_entry",
-    "validate_config_file",
-    "validate_entry",
-]
 
 DEFAULT_ALGO = "denfac"
 DEFAULT_ENV = "sb3_denfac/ContinuousCartPole-v0"
@@ -290,7 +261,3 @@ def main(argv: Sequence[str] | None = None) -> None:
         COMMANDS[argv[0]](argv[1:])
     except ZooConfigError as e:
         sys.exit(f"sb3-denfac-zoo: error: {e}")
-
-
-if __name__ == "__main__":
-    main()
