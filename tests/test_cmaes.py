@@ -68,7 +68,7 @@ def test_learns_constant_best_action(incumbent, tmp_path):
     assert np.abs(after - 0.5).mean() < 0.15  # seeds 0-4: 0.005-0.10
     assert model.best_return > -0.01 and model.generation == 1500 // (5 * model.population_size)
     header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
-    for key in ("train/cma_sigma", "train/best_return", "train/generation", "rollout/ep_rew_mean", "time/fps"):
+    for key in ("train/cma_sigma", "train/best_return", "train/n_updates", "rollout/ep_rew_mean", "time/fps"):
         assert key in header
 
 

@@ -17,8 +17,14 @@ from stable_baselines3.common.callbacks import (
     StopTrainingOnMaxEpisodes,
 )
 from stable_baselines3.common.callbacks import ProgressBarCallback as SB3ProgressBarCallback
+from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
+from sb3_denfac.common.logging_keys import RENAMED, TRAIN_KEYS, WRITTEN_BY
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+#: The algorithm (zoo name, the key of ``WRITTEN_BY``) of each tiny variant of conftest.py.
+ALGORITHM_OF = {"denfac_plain": "denfac", "ddpg_ig": "ddpg"}
 
 # ----- logging, callbacks, progress bar (SB3 tests/test_tensorboard.py, test_callbacks.py) -----------------------------
 
@@ -43,6 +49,53 @@ def test_tensorboard(tmp_path: pathlib.Path, name: str, episode_steps, make_mode
 
     model.learn(episode_steps, reset_num_timesteps=False, log_interval=1)  # continues the same run
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"{class_name}_1"]
+
+
+class KeyCollector(KVWriter):
+    """An SB3 logger output that keeps the name of every key written to it (whatever the formats it is excluded from)."""
+
+    def __init__(self) -> None:
+        self.keys: set[str] = set()
+
+    def write(self, key_values: dict, key_excluded: dict, step: int = 0) -> None:
+        self.keys |= set(key_values)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.algorithms("all")
+def test_train_keys_are_the_documented_ones(name: str, episode_steps, make_env, make_model) -> None:
+    """Each algorithm writes exactly the ``train/`` keys that sb3_denfac.common.logging_keys (and the table of
+    docs/conventions.md) gives it: no undocumented key, none of the documented ones missing, no name of 0.4."""
+    collector = KeyCollector()
+    # Rewards shifted to > 0: NFAC and CACLA write train/actor_loss only when their actor moved (a TD error > 0), which
+    # a critic starting near 0 never sees on Pendulum's negative rewards in a few episodes.
+    env = gym.wrappers.TransformReward(make_env(), lambda reward: reward + 20.0)
+    model = make_model(name, env=env, seed=0)
+    model.set_logger(Logger(folder=None, output_formats=[collector]))
+    model.learn(6 * episode_steps, log_interval=1)
+    written = {key for key in collector.keys if key.startswith("train/")}
+    assert written == set(WRITTEN_BY[ALGORITHM_OF.get(name, name)])
+    assert not written & set(RENAMED)
+
+
+def test_logging_keys_table_is_the_module() -> None:
+    """docs/conventions.md's logging-keys table has one row per key of TRAIN_KEYS, with its meaning and the algorithms
+    that write it (WRITTEN_BY), in the module's order."""
+    columns = ["denfac", "ddpg", "nfac", "cacla", "cmaes"]
+    assert set(WRITTEN_BY) == set(columns)
+    assert all(key in TRAIN_KEYS for keys in WRITTEN_BY.values() for key in keys)
+    rows = [line for line in (REPO / "docs" / "conventions.md").read_text().splitlines() if line.startswith("| `train/")]
+    table = {}
+    for row in rows:
+        key, meaning, *marks = (cell.strip() for cell in row.strip().strip("|").split(" | "))
+        table[key.strip("`")] = (meaning, marks)
+    table = {key: value for key, value in table.items() if key not in RENAMED}  # the renaming table's rows
+    assert list(table) == list(TRAIN_KEYS)
+    for key, (meaning, marks) in table.items():
+        assert meaning == TRAIN_KEYS[key], key
+        assert marks == ["x" if key in WRITTEN_BY[algo] else "-" for algo in columns], key
 
 
 @pytest.mark.algorithms("all")

@@ -193,7 +193,7 @@ def test_learns_constant_best_action(inverting_gradients):
 def test_tensorboard_keys():
     model = DDPG("MlpPolicy", "Pendulum-v1", learning_starts=10, batch_size=16, seed=0)
     model.learn(30)
-    for key in ("train/actor_loss", "train/critic_loss", "train/q_value", "train/actor_out_of_bounds"):
+    for key in ("train/actor_loss", "train/critic_loss", "train/q_target_mean", "train/actor_out_of_bounds"):
         assert key in model.logger.name_to_value
 
 

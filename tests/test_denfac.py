@@ -106,9 +106,16 @@ def test_one_update_changes_both_networks_and_stays_finite(make_denfac):
     assert any(not th.equal(actor_before[k], v) for k, v in model.actor.state_dict().items())
     assert any(not th.equal(critic_before[k], v) for k, v in model.critic.state_dict().items())
     values = model.logger.name_to_value
-    for key in ("critic_loss", "actor_objective", "importance_weight_mean", "importance_weight_min", "q_mean", "update_time"):
+    for key in (
+        "critic_loss",
+        "actor_loss",
+        "importance_weight_mean",
+        "importance_weight_min",
+        "q_target_mean",
+        "update_time",
+    ):
         assert np.isfinite(values[f"train/{key}"]), key
-    assert values["train/buffer_size"] == model.replay_buffer.size() and values["train/n_updates"] >= 1
+    assert values["train/n_transitions"] == model.replay_buffer.size() and values["train/n_updates"] >= 1
 
 
 def test_timeouts_bootstrap_or_not(make_denfac):

@@ -83,8 +83,8 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
     :param incumbent: "mean" or "best": which parameters ``predict`` uses (see above)
     :param cma_options: extra options for ``cma.CMAEvolutionStrategy`` (e.g. ``{"CMA_diagonal": True}``)
     :param stats_window_size: episodes averaged in ``rollout/ep_rew_mean``
-    :param tensorboard_log: TensorBoard log directory (logs train/generation, train/cma_sigma, train/best_return,
-        train/generation_mean_return, train/generation_best_return, train/population_size)
+    :param tensorboard_log: TensorBoard log directory (the ``train/`` keys of :mod:`sb3_denfac.common.logging_keys`:
+        train/cma_sigma, train/best_return, train/generation_mean_return...; train/n_updates counts generations)
     :param policy_kwargs: keyword arguments of the policy
     :param verbose: verbosity level
     :param seed: random seed (also seeds CMA-ES's private generator)
@@ -232,7 +232,7 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
             self.best_params = np.array(self._candidates[best], dtype=np.float64)
         incumbent = self.es.mean if self.incumbent == "mean" else self.best_params
         self._load_parameters(self.policy, np.asarray(incumbent))
-        self.logger.record("train/generation", self.generation)
+        self.logger.record("train/n_updates", self.generation, exclude="tensorboard")  # one search update per generation
         self.logger.record("train/cma_sigma", float(self.es.sigma))
         self.logger.record("train/best_return", self.best_return)
         self.logger.record("train/generation_mean_return", float(returns.mean()))

@@ -80,10 +80,8 @@ class DDPG(
     :param replay_buffer_kwargs: its keyword arguments
     :param optimize_memory_usage: memory-efficient replay buffer variant
     :param n_steps: n-step returns (SB3's NStepReplayBuffer)
-    :param tensorboard_log: TensorBoard log directory (logs train/actor_loss, train/critic_loss, train/q_value,
-        train/actor_out_of_bounds (fraction of raw actor outputs outside [-1, 1]), train/actor_learning_rate,
-        train/critic_learning_rate; with inverting gradients train/actor_loss is -mean Q, the inverted gradient having no
-        scalar loss)
+    :param tensorboard_log: TensorBoard log directory (the ``train/`` keys of :mod:`sb3_denfac.common.logging_keys`;
+        with inverting gradients train/actor_loss is -mean Q, the inverted gradient having no scalar loss)
     :param policy_kwargs: keyword arguments of the policy
     :param verbose: verbosity level
     :param seed: random seed
@@ -177,7 +175,7 @@ class DDPG(
         low = th.tensor(-1.0, device=self.device)
         high = th.tensor(1.0, device=self.device)
 
-        actor_losses, critic_losses, q_values, out_of_bounds = [], [], [], []
+        actor_losses, critic_losses, q_targets, out_of_bounds = [], [], [], []
         for _ in range(gradient_steps):
             self._n_updates += 1
             replay_data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
@@ -189,6 +187,7 @@ class DDPG(
                 next_q = th.cat(self.critic_target(replay_data.next_observations, next_actions), dim=1)
                 next_q, _ = th.min(next_q, dim=1, keepdim=True)
                 target_q = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q
+                q_targets.append(target_q.mean().item())
 
             current_q = self.critic(replay_data.observations, replay_data.actions)
             critic_loss = sum(F.mse_loss(q, target_q) for q in current_q)
@@ -214,7 +213,6 @@ class DDPG(
                 actor_loss.backward()
             self.actor.optimizer.step()
             actor_losses.append(actor_loss.item())
-            q_values.append(q_pi.mean().item())
             out_of_bounds.append((actions_pi.detach().abs() > 1.0).float().mean().item())
 
             polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
@@ -229,5 +227,5 @@ class DDPG(
         if critic_losses:
             self.logger.record("train/critic_loss", float(np.mean(critic_losses)))
             self.logger.record("train/actor_loss", float(np.mean(actor_losses)))
-            self.logger.record("train/q_value", float(np.mean(q_values)))
+            self.logger.record("train/q_target_mean", float(np.mean(q_targets)))
             self.logger.record("train/actor_out_of_bounds", float(np.mean(out_of_bounds)))

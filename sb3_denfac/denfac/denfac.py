@@ -361,14 +361,14 @@ class DENFAC(
         updater.finish()
         self._n_updates += 1
         self._last_update_stats = dict(weights=weights, q_targets=q_targets)
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/critic_loss", float(critic_loss))
-        self.logger.record("train/actor_objective", float(actor_objective))
+        self.logger.record("train/actor_loss", -float(actor_objective))
+        self.logger.record("train/q_target_mean", q_targets.mean().item())
+        self.logger.record("train/n_transitions", obs.shape[0])
+        self.logger.record("train/update_time", time.perf_counter() - start)
         self.logger.record("train/importance_weight_mean", weights.mean().item())
         self.logger.record("train/importance_weight_min", weights.min().item())
-        self.logger.record("train/q_mean", q_targets.mean().item())
-        self.logger.record("train/update_time", time.perf_counter() - start)
-        self.logger.record("train/buffer_size", obs.shape[0])
-        self.logger.record("train/n_updates", self._n_updates)
         self.logger.record("train/fitted_iterations", n_iterations)
 
     def _importance_weights(
