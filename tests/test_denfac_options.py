@@ -183,6 +183,23 @@ def test_auto_picks_fast_for_the_proximal_actor(small_model):
     assert isinstance(small_model(actor_proximal=1.0, update_path="plain")._make_updater(), AutogradUpdater)
 
 
+def test_make_updater_says_why_auto_fell_back(small_model):
+    """make_updater, the one place the updater is chosen, names the reason "auto" did not take the fast updater."""
+    from sb3_denfac.denfac.updaters import FitSettings, make_updater
+
+    model = small_model(batch_size=16)
+    choice = make_updater(model.policy, FitSettings.of(model), "auto")
+    assert isinstance(choice.updater, FastUpdater) and choice.fast_refused is None
+    prioritised = small_model(batch_size=16, prioritized="critic")
+    choice = make_updater(prioritised.policy, FitSettings.of(prioritised), "auto")
+    assert isinstance(choice.updater, AutogradUpdater) and "prioritized='critic'" in choice.fast_refused
+    sgd = small_model(batch_size=16, policy_kwargs=dict(optimizer_class=th.optim.SGD))
+    choice = make_updater(sgd.policy, FitSettings.of(sgd), "auto")
+    assert isinstance(choice.updater, AutogradUpdater) and "default MLP networks and Adam" in choice.fast_refused
+    plain = make_updater(model.policy, FitSettings.of(model), "plain")
+    assert isinstance(plain.updater, AutogradUpdater) and plain.fast_refused is None
+
+
 def test_invalid_options(small_model):
     for kwargs, match in [
         (dict(prioritized="td"), "prioritized must be one of"),

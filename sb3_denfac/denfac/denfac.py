@@ -30,16 +30,14 @@ from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, beh
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
-from sb3_denfac.denfac.fast import FastUpdater, supported_networks
-from sb3_denfac.denfac.options import check_options, fast_refusal, fitted_iterations
+from sb3_denfac.denfac.options import check_options, fitted_iterations
 from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.presets import DEFAULT_POLICY_KWARGS
-from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
+from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
 WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
-UPDATE_PATHS = ("auto", "fast", "plain")
 
 
 class DENFAC(
@@ -285,7 +283,7 @@ class DENFAC(
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()
-        self._fit_settings()  # refuses update_path="fast" with an option only the autograd updater implements
+        check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
@@ -315,25 +313,9 @@ class DENFAC(
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
         self._update(fitted_iterations(self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio, gradient_steps))
 
-    def _fit_settings(self) -> FitSettings:
-        """This model's :class:`FitSettings`; a ValueError if ``update_path="fast"`` cannot carry them out."""
-        settings = FitSettings.of(self)
-        unsupported = settings.autograd_only()  # options on that only the autograd updater implements
-        if self.update_path == "fast" and unsupported:
-            raise ValueError(fast_refusal(unsupported))
-        return settings
-
     def _make_updater(self) -> Updater:
-        """The updater that carries out this update (``update_path``; see :mod:`~sb3_denfac.denfac.updaters`)."""
-        settings = self._fit_settings()
-        if self.update_path == "plain" or settings.autograd_only():
-            return AutogradUpdater(self.policy, settings)
-        layers = supported_networks(self.policy)
-        if layers is None:
-            if self.update_path == "fast":
-                raise ValueError("update_path='fast' needs vector observations, the default MLP networks and Adam")
-            return AutogradUpdater(self.policy, settings)
-        return FastUpdater(self.policy, settings, *layers)
+        """The updater that carries out this update (``update_path``: :func:`~.updaters.make_updater` decides)."""
+        return make_updater(self.policy, FitSettings.of(self), self.update_path).updater
 
     def _update(self, n_iterations: int | None = None) -> None:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""

@@ -78,15 +78,6 @@ def fitted_iterations(n_fitted_iterations: int, critic_steps: int, ratio: float 
     return max(1, min(n_fitted_iterations, math.ceil(wanted)))
 
 
-def autograd_only(prioritized: str) -> list[str]:
-    """The options that are on and that only the autograd updater implements."""
-    return [f"prioritized={prioritized!r}"] * (prioritized != "none")
-
-
-def fast_refusal(unsupported: list[str]) -> str:
-    return f"update_path='fast' does not support {' and '.join(unsupported)}: use update_path='auto' or 'plain'"
-
-
 class PrioritisedSampler:
     """Mini-batches drawn with replacement from P(i) = p_i / sum p, p_i = (|delta_i| + eps)^alpha, with their
     importance weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (module docstring)."""

@@ -18,6 +18,7 @@ Two implementations compute the same update up to float rounding (tested): :clas
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
 (hand-written steps on flat parameters). Of the options of :mod:`~sb3_denfac.denfac.options`, both implement the
 proximal actor and several critics (``n_critics``); prioritised sampling exists in the autograd updater only.
+:func:`make_updater` is the one place that picks between them (DENFAC's ``update_path``).
 """
 
 from __future__ import annotations
@@ -25,14 +26,14 @@ from __future__ import annotations
 import copy
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch as th
 from torch import nn
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
-from sb3_denfac.denfac.options import PrioritisedSampler, autograd_only, proximal_actor_backward
+from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
 
 
 @dataclass(frozen=True)
@@ -67,10 +68,6 @@ class FitSettings:
             priority_eps=model.priority_eps,
             actor_proximal=model.actor_proximal,
         )
-
-    def autograd_only(self) -> list[str]:
-        """The options that are on and that only :class:`AutogradUpdater` implements (:mod:`~.options`)."""
-        return autograd_only(self.prioritized)
 
 
 class Updater(ABC):
@@ -238,3 +235,47 @@ class AutogradUpdater(Updater):
         critic.requires_grad_(True)
         actor.set_training_mode(False)
         return objective.detach()
+
+
+# ----- which updater ---------------------------------------------------------------------------------------------------
+#: DENFAC's ``update_path`` values: the fast updater where it applies, the fast one (or an error), the autograd one.
+UPDATE_PATHS = ("auto", "fast", "plain")
+
+
+def _options_refusal(settings: FitSettings) -> str | None:
+    """Why the fast updater cannot carry out these settings (an option only the autograd updater implements), or None."""
+    if settings.prioritized != "none":
+        return f"update_path='fast' does not support prioritized={settings.prioritized!r}: use update_path='auto' or 'plain'"
+    return None
+
+
+def check_update_path(update_path: str, settings: FitSettings) -> None:
+    """At construction, before any network exists: a ValueError if ``update_path="fast"`` asks for an option the fast
+    updater does not implement (the networks are checked by :func:`make_updater`, at the update)."""
+    refusal = _options_refusal(settings)
+    if update_path == "fast" and refusal is not None:
+        raise ValueError(refusal)
+
+
+class UpdaterChoice(NamedTuple):
+    updater: Updater
+    #: why the fast updater was not used ("auto" fell back to the autograd one); None if it was, or with "plain"
+    fast_refused: str | None
+
+
+def make_updater(policy: nn.Module, settings: FitSettings, update_path: str) -> UpdaterChoice:
+    """The updater of one update (``update_path``: "plain" the autograd one; "fast" the fast one, a ValueError saying
+    why where it cannot; "auto" the fast one where it can, else the autograd one), and why the fast one was refused."""
+    from sb3_denfac.denfac.fast import FastUpdater, supported_networks  # fast.py builds on this module
+
+    if update_path == "plain":
+        return UpdaterChoice(AutogradUpdater(policy, settings), None)
+    refusal = _options_refusal(settings)
+    layers = supported_networks(policy) if refusal is None else None
+    if refusal is None and layers is None:
+        refusal = "update_path='fast' needs vector observations, the default MLP networks and Adam"
+    if refusal is None:
+        return UpdaterChoice(FastUpdater(policy, settings, *layers), None)  # type: ignore[misc]
+    if update_path == "fast":
+        raise ValueError(refusal)
+    return UpdaterChoice(AutogradUpdater(policy, settings), refusal)
