@@ -62,3 +62,29 @@ def test_v0_2_denfac_keeps_the_plain_actor_update() -> None:
     assert model.actor_proximal == 0.0 and DENFAC("MlpPolicy", "Pendulum-v1").actor_proximal == 1.0
     assert model.critic.n_critics == 1 and DENFAC("MlpPolicy", "Pendulum-v1").critic.n_critics == 2
     assert model.update_to_data_ratio is None and model.gradient_steps == -1  # 0.2 saved gradient_steps=1
+
+
+def test_policy_defaults_are_saved_and_missing_keys_mean_an_older_file(tmp_path) -> None:
+    """DENFACPolicy's defaults are the library's (no overlay) and a model records them in ``policy_kwargs``, so a file
+    says which networks it has; a file without those keys (as 0.1 wrote, and 0.2/0.3 without n_critics) gets the
+    networks of the version that wrote it (sb3_denfac.common.compat)."""
+    from sb3_denfac.common.compat import DENFAC_POLICY_KWARGS_OF_OLD_FILES
+    from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH
+
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    model = DENFAC("MlpPolicy", env, seed=0)
+    recorded = {key: model.policy_kwargs[key] for key in DENFAC_POLICY_KWARGS_OF_OLD_FILES}
+    assert recorded == {"net_arch": DEFAULT_NET_ARCH, "batch_norm": False, "init": "default", "n_critics": 2}
+    model.save(tmp_path / "now.zip")
+    loaded = DENFAC.load(tmp_path / "now.zip", device="cpu")
+    assert loaded.critic.n_critics == 2 and {k: loaded.policy_kwargs[k] for k in recorded} == recorded
+
+    paper_nets = dict(net_arch=dict(pi=[20], qf=[50, 7]), batch_norm=True, init="paper", n_critics=1)
+    old = DENFAC("MlpPolicy", env, seed=0, policy_kwargs=paper_nets)
+    for key in DENFAC_POLICY_KWARGS_OF_OLD_FILES:  # what a file of 0.1 saved: none of these keys
+        del old.policy_kwargs[key]
+    old.save(tmp_path / "old.zip")
+    loaded = DENFAC.load(tmp_path / "old.zip", device="cpu")  # the paper's networks, or the state dict would not fit
+    assert {k: loaded.policy_kwargs[k] for k in paper_nets} == paper_nets
+    obs = np.asarray(EXPECTED["obs"], dtype=np.float32)
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], old.predict(obs, deterministic=True)[0])

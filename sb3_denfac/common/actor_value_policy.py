@@ -13,13 +13,14 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
+from sb3_denfac.common.compat import LegacyOptimizerAliasesMixin
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_, set_bn_training_mode
 
 #: Hidden sizes: the paper's Cartpole actor and its critics.
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "vf": [50, 7]}
 
 
-class DeterministicActorValuePolicy(DeterministicActor):
+class DeterministicActorValuePolicy(LegacyOptimizerAliasesMixin, DeterministicActor):
     """Deterministic actor mu(s) (linear output in the [-1, 1]-scaled action space) and state-value critic V(s).
 
     The actor is :class:`~sb3_denfac.common.actor.DeterministicActor` (this policy is one, its MLP at ``actor``, the
@@ -97,16 +98,6 @@ class DeterministicActorValuePolicy(DeterministicActor):
         # As SB3's TD3/SAC: each network carries its optimizer (the features extractor with it, see actor_modules).
         self.actor.optimizer = self._make_optimizer(self.actor_modules(), lr_schedule)
         self.critic.optimizer = self._make_optimizer(self.critic_modules(), self.critic_lr_schedule)
-
-    @property
-    def actor_optimizer(self) -> th.optim.Optimizer:
-        """Read-only alias of ``actor.optimizer`` (its name in sb3-denfac 0.2)."""
-        return self.actor.optimizer
-
-    @property
-    def critic_optimizer(self) -> th.optim.Optimizer:
-        """Read-only alias of ``critic.optimizer`` (its name in sb3-denfac 0.2)."""
-        return self.critic.optimizer
 
     def actor_modules(self) -> list[nn.Module]:
         """mu(s) as trained by the actor optimiser: its features extractor and MLP."""

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.common.utils import FloatSchedule, update_learning_rate
 
@@ -36,8 +35,6 @@ class ActorCriticRatesMixin:
     policy: Any
     logger: Any
     _current_progress_remaining: float
-    #: torch save names of earlier versions -> their names now (see :meth:`set_parameters`).
-    _legacy_torch_names: dict[str, str] = {}
 
     def _setup_actor_critic_schedules(self) -> None:
         """Build the two schedules and give each optimizer its initial rate (the rate at progress remaining 1)."""
@@ -60,12 +57,3 @@ class ActorCriticRatesMixin:
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "actor_lr_schedule", "critic_lr_schedule"]  # type: ignore[misc]
-
-    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True, device: Any = "auto") -> None:
-        """SB3's ``set_parameters``, also for files saved with the torch names of earlier versions
-        (``_legacy_torch_names``, e.g. NFAC's ``policy.actor_optimizer`` of 0.2, now ``policy.actor.optimizer``)."""
-        params = load_path_or_dict
-        if not isinstance(params, dict):
-            _, params, _ = load_from_zip_file(params, device=device, load_data=False)
-        params = {self._legacy_torch_names.get(name, name): value for name, value in params.items()}
-        super().set_parameters(params, exact_match=exact_match, device=device)  # type: ignore[misc]

@@ -32,6 +32,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_denfac.common.actor_value_policy import DeterministicActorValuePolicy
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
+from sb3_denfac.common.compat import ON_POLICY_TORCH_NAMES_0_2, LegacyTorchNamesMixin
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 
 
@@ -77,7 +78,9 @@ class TransitionBuffer:
         )
 
 
-class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, OnPolicyAlgorithm):
+class DeterministicOnPolicyAlgorithm(
+    InputChecksMixin, ProgressBarMixin, LegacyTorchNamesMixin, ActorCriticRatesMixin, OnPolicyAlgorithm
+):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
     learn online in ``_on_step_transition`` and learn from the collected rollout in ``train``. NaN/inf inputs and
@@ -171,11 +174,7 @@ class DeterministicOnPolicyAlgorithm(InputChecksMixin, ProgressBarMixin, ActorCr
         self._setup_actor_critic_schedules()  # alpha_a and alpha_c, see ActorCriticRatesMixin
         self.policy.set_training_mode(False)  # BN layers normalise with their running statistics, see refresh_bn_statistics
 
-    #: sb3-denfac 0.2 saved the optimizers as policy attributes
-    _legacy_torch_names: ClassVar[dict[str, str]] = {
-        "policy.actor_optimizer": "policy.actor.optimizer",
-        "policy.critic_optimizer": "policy.critic.optimizer",
-    }
+    _legacy_torch_names: ClassVar[dict[str, str]] = ON_POLICY_TORCH_NAMES_0_2  # sb3_denfac.common.compat
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.actor.optimizer", "policy.critic.optimizer"], []

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import copy
 import time
-import warnings
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -26,13 +24,18 @@ from sb3_denfac.common.checks import (
     check_positive,
     check_sigma,
 )
+from sb3_denfac.common.compat import (
+    check_denfac_arguments,
+    denfac_attributes_of_old_files,
+    record_policy_defaults,
+    upgrade_denfac,
+)
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.options import check_options, fitted_iterations
-from sb3_denfac.denfac.policies import DENFACPolicy, MlpPolicy
-from sb3_denfac.denfac.presets import DEFAULT_POLICY_KWARGS
+from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
@@ -50,51 +53,15 @@ class DENFAC(
 ):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
-    Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3,
-    eqs. (4)-(5) and Algorithm 1; hyper-parameters from section 4 and Figure 5.
+    Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3, eqs. (4)-(5) and Algorithm 1;
+    hyper-parameters from section 4 and Figure 5. At the end of every episode, K fitted iterations over the whole FIFO
+    replay buffer D: targets q_t of eq. (4) from (Q_{k-1}, pi_{k-1}) with truncated importance weights c_t, a weighted
+    regression of the critic on them, then G steps of the actor ascending eq. (5) (:meth:`_update`).
 
-    Execution: the deterministic actor mu(s) (linear, unbounded output) is played through a truncated Gaussian
-    N(mu(s), sigma^2) on the scaled action bounds [-1, 1]; each transition stores its behaviour mean mu_b(s).
-    At the end of every episode one update runs over the whole FIFO replay buffer D (``buffer_size`` transitions):
-
-    for k = 1..K:
-        q_t = r_{t+1} + gamma Q_{k-1}(s_{t+1}, pi_{k-1}(s_{t+1}))  (r_{t+1} on terminal states), before any reset
-        c_t = min(1, pi_{k-1}(a_t|s_t) / pi_b(a_t|s_t))             (Retrace-style truncated importance weight)
-        Q_k <- random critic if reset_critic else Q_{k-1}; ``critic_steps`` Adam steps on 1/N sum c_t (Q_k(s_t,a_t) - q_t)^2
-        pi_k <- random actor if reset_actor else pi_{k-1}; G Adam steps ascending 1/N sum Q_k(s_t, pi_k(s_t))
-                (with inverting gradients if ``inverting_gradients``)
-
-    Two configurations (:mod:`~sb3_denfac.denfac.presets`):
-
-    - **Default** (``DENFAC("MlpPolicy", env)``): the same K fitted iterations at every episode end, with Adam (step
-      1e-3, beta1 = 0.9) on mini-batches of 256 drawn uniformly from D (100,000 transitions), 50 critic and 25 actor
-      steps per iteration, actor and critic kept across iterations and episodes, 64-64 networks without batch norm,
-      PyTorch's initialisation, sigma = 0.1, no importance weights, the proximal actor (``actor_proximal=1.0``,
-      :mod:`~.options`) and two critics (``n_critics=2``). Each change from the paper was measured alone
-      (``benchmarks/results/denfac_ablation/``). With a kept actor, min(1, pi/pi_b) is ~0 for most of D once the actor
-      has moved, which throws the data away (eq. (4)'s target uses pi_{k-1}(s') itself and needs no weight); N(0, 0.01)
-      weights without batch norm let the signal vanish; an actor re-initialised at every iteration jumps between
-      updates; 10 critic steps under-fit returns in the hundreds; step 0.1 with beta1 = 0 makes each step lr * sign(g).
-      The proximal actor moves the actions by about 1/(2 lambda) per update whatever the reward scale: without it the
-      actor jumps onto the critic's extrapolated optimum, the next data leave the fitted region and the critic diverges.
-      Two critics (clipped double Q, Fujimoto et al. 2018): with hundreds of critic steps per episode on its own
-      targets, one critic overestimates beyond any return the rewards allow and the actor climbs the error.
-    - **Paper** (``DENFAC("MlpPolicy", env, **presets.PAPER)``, and the zoo YAML entries of the paper's envs with
-      Figure 5's per-env values): Algorithm 1 as written, with the authors' solver and networks.
-
-    Implementation choices (documented differences or precisions):
-
-    - Time limits: truncated episodes bootstrap (SB3 semantics); ``bootstrap_on_timeout=False`` reproduces the
-      paper-era authors' code, which treated them as terminal (fixed by them in 2017).
-    - Loss scale: 1/N as in Algorithm 1 (the authors' code: 1/(2N)); Adam ignores it except via eps and clipping.
-    - Target actions pi_{k-1}(s') are clipped to [-1, 1] (the executed policy never leaves the bounds).
-    - Batch norm (``batch_norm=True``, the paper's): targets and importance weights use eval mode (running statistics);
-      the critic is in eval mode during the actor steps (gradients of the fitted function, its statistics unchanged).
-      With ``bn_momentum=None`` the statistics are reset at every fit and average its steps (those of the buffer).
-    - Warm-up: ``learning_starts`` > 0 plays uniform actions (as SB3) whose density is the uniform one in the weights.
-    - Importance weights below sqrt(float32's smallest normal) are exactly 0 (subnormals are many times slower).
-    - Budget: ``learn(total_timesteps)`` stops there, also inside an episode (:mod:`sb3_denfac.common.budget`).
-    - Input checks (:class:`~sb3_denfac.common.checks.InputChecksMixin`): bad inputs raise errors that name them.
+    ``DENFAC("MlpPolicy", env)`` is the library default (mini-batch Adam on a kept actor and critic, the proximal actor,
+    two critics, 64-64 networks); ``DENFAC("MlpPolicy", env, **presets.PAPER)`` is Algorithm 1 as written
+    (:mod:`~sb3_denfac.denfac.presets`). Why the default differs from the paper, and the implementation's choices
+    (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -140,8 +107,8 @@ class DENFAC(
     :param tensorboard_log: TensorBoard log directory (None: no logging)
     :param policy_kwargs: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper ``dict(pi=[20], qf=[50, 7])``),
         ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's; "paper": N(0, 0.01^2)), ``n_critics``
-        (default 2: targets from their minimum; paper 1), ``bn_momentum``, ``activation_fn`` (:class:`DENFACPolicy`);
-        keys left out take :data:`~sb3_denfac.denfac.presets.DEFAULT_POLICY_KWARGS`
+        (default 2: targets from their minimum; paper 1), ``bn_momentum``, ``activation_fn``: :class:`DENFACPolicy`,
+        whose defaults apply to the keys left out (and are saved with the model)
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
@@ -200,16 +167,13 @@ class DENFAC(
         check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
         check_gamma(gamma)
         learning_rate = check_learning_rate("learning_rate", learning_rate)
-        if update_path == "compiled":
-            raise ValueError(
-                "update_path='compiled' was removed in sb3-denfac 0.2 (measured no faster than 'fast' on CPU): use 'fast'"
-            )
+        check_denfac_arguments(update_path)  # sb3_denfac.common.compat: names of earlier versions
         check_choice("update_path", update_path, UPDATE_PATHS)
         self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
             prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size
         )
-        if not _init_setup_model:  # SB3's load (saved attributes follow): files of <= 0.2 had the proximal actor off
-            self.actor_proximal = 0.0
+        if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
+            denfac_attributes_of_old_files(self)
         super().__init__(
             policy,
             env,
@@ -225,7 +189,7 @@ class DENFAC(
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             optimize_memory_usage=False,
-            policy_kwargs=policy_kwargs,
+            policy_kwargs=dict(policy_kwargs or {}),  # copied: the caller's dict is not modified
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,
@@ -256,30 +220,22 @@ class DENFAC(
         self.bootstrap_on_timeout = bootstrap_on_timeout
         self.update_path = update_path
         check_holds_one_episode(self.env, self.buffer_size)
-        # In policy_kwargs, so saved models keep them (0.1 saved none: DENFACPolicy's own, the paper's, apply).
-        for key, value in DEFAULT_POLICY_KWARGS.items():
-            self.policy_kwargs.setdefault(key, copy.deepcopy(value))
+        record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
             self._setup_model()
 
     def _setup_model(self) -> None:
-        if self.update_path == "compiled":  # a model saved by sb3-denfac 0.1
-            warnings.warn("update_path='compiled' was removed in sb3-denfac 0.2: this model now updates with 'fast'")
-            self.update_path = "fast"
-        self.gradient_steps = -1  # files saved before update_to_data_ratio say 1 (one update per episode, as now)
+        upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings
         if self.replay_buffer_class is None:
             self.replay_buffer_class = DENFACReplayBuffer
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
             raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
         self.policy_kwargs["sigma"] = self.sigma
-        for key in ("actor_learning_rate", "critic_learning_rate"):  # written by 0.1 and 0.2, now the algorithm's
-            self.policy_kwargs.pop(key, None)
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
         if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
             optimizer_kwargs.setdefault("betas", self.adam_betas)
             optimizer_kwargs.setdefault("eps", self.adam_eps)
         self.policy_kwargs["optimizer_kwargs"] = optimizer_kwargs
-        self.policy_kwargs.setdefault("bn_momentum", None)
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()

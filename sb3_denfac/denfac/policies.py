@@ -1,8 +1,10 @@
 """DENFAC networks: an unbounded deterministic actor mu(s) and a Q(s, a) critic, both batch-normalised MLPs.
 
-Paper, section 4: leaky ReLU, batch normalisation on every layer except the last two, linear last layer, weights
-N(0, 0.01). Critic hidden layers 50-7; actor hidden layers 5 (Acrobot), 20 (Cartpole), 20-10 (Half-Cheetah).
-Actions live in SB3's scaled space [-1, 1]; the actor output is unbounded (inverting gradients keep it in bounds).
+The defaults are the library's (64-64 networks, no batch norm, PyTorch's initialisation, two Q networks). Paper,
+section 4 (:data:`~sb3_denfac.denfac.presets.PAPER`): leaky ReLU, batch normalisation on every layer except the last
+two, linear last layer, weights N(0, 0.01), one Q network. Critic hidden layers 50-7; actor hidden layers 5 (Acrobot),
+20 (Cartpole), 20-10 (Half-Cheetah). Actions live in SB3's scaled space [-1, 1]; the actor output is unbounded
+(inverting gradients keep it in bounds).
 """
 
 from __future__ import annotations
@@ -21,14 +23,15 @@ from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
 from sb3_denfac.common.checks import check_number
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
 
-DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [20], "qf": [50, 7]}
+#: ``net_arch`` of :class:`DENFACPolicy` when it is None (paper: pi=[20], qf=[50, 7]).
+DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [64, 64], "qf": [64, 64]}
 
 
 class DENFACActor(DeterministicActor):
     """DENFAC's mu(s): :class:`~sb3_denfac.common.actor.DeterministicActor` with a linear (unbounded) output, the
     truncated Gaussian of ``sigma`` for ``predict(deterministic=False)`` and BN momentum None (cumulative average)."""
 
-    def __init__(self, *args: Any, bn_momentum: float | None = None, sigma: float | None = 0.05, **kwargs: Any):
+    def __init__(self, *args: Any, bn_momentum: float | None = None, sigma: float | None = 0.1, **kwargs: Any):
         super().__init__(*args, bn_momentum=bn_momentum, sigma=sigma, **kwargs)
 
 
@@ -60,11 +63,11 @@ class DENFACCritic(BaseModel):
         features_extractor: BaseFeaturesExtractor,
         features_dim: int,
         activation_fn: type[nn.Module] = nn.LeakyReLU,
-        batch_norm: bool = True,
+        batch_norm: bool = False,
         bn_momentum: float | None = None,
-        init: str = "paper",
+        init: str = "default",
         normalize_images: bool = True,
-        n_critics: int = 1,
+        n_critics: int = 2,
     ):
         super().__init__(
             observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
@@ -108,13 +111,14 @@ class DENFACPolicy(BasePolicy):
     :param observation_space: observation space
     :param action_space: Box action space
     :param lr_schedule: SB3 learning-rate schedule (used for both networks unless a rate is given below)
-    :param net_arch: ``dict(pi=[...], qf=[...])`` or one list for both (default pi=[20], qf=[50, 7])
+    :param net_arch: ``dict(pi=[...], qf=[...])`` or one list for both (default pi=[64, 64], qf=[64, 64]; paper
+        pi=[20], qf=[50, 7])
     :param activation_fn: hidden activation (paper: leaky ReLU, slope 0.01)
-    :param batch_norm: batch normalisation as in the paper
+    :param batch_norm: batch normalisation before every linear layer but the last (default False; paper True)
     :param bn_momentum: BatchNorm1d momentum; None (default) = cumulative average over the steps since the last
         reset of the running statistics (DENFAC resets them at every fit, so eval mode uses the buffer's statistics)
-    :param init: "paper" (N(0, 0.01^2)) or "default" (PyTorch) initialisation
-    :param sigma: exploration std of the truncated Gaussian on [-1, 1]
+    :param init: "default" (PyTorch, the default) or "paper" (N(0, 0.01^2)) initialisation
+    :param sigma: exploration std of the truncated Gaussian on [-1, 1] (DENFAC passes its own)
     :param actor_learning_rate: initial rate of the actor if not None (else ``lr_schedule(1)``); the algorithm sets
         alpha_a before each update (:mod:`~sb3_denfac.common.learning_rates`), this serves policies used alone
     :param critic_learning_rate: the same for the critic (alpha_c)
@@ -123,7 +127,7 @@ class DENFACPolicy(BasePolicy):
     :param normalize_images: whether to normalise images
     :param optimizer_class: optimiser (default Adam)
     :param optimizer_kwargs: optimiser keyword arguments (DENFAC passes ``betas`` and ``eps``)
-    :param n_critics: Q networks of the critic (paper: 1; 2 = clipped double Q, see :class:`DENFACCritic`)
+    :param n_critics: Q networks of the critic (default 2: clipped double Q, see :class:`DENFACCritic`; paper: 1)
     """
 
     actor: DENFACActor
@@ -136,10 +140,10 @@ class DENFACPolicy(BasePolicy):
         lr_schedule: Schedule,
         net_arch: list[int] | dict[str, list[int]] | None = None,
         activation_fn: type[nn.Module] = nn.LeakyReLU,
-        batch_norm: bool = True,
+        batch_norm: bool = False,
         bn_momentum: float | None = None,
-        init: str = "paper",
-        sigma: float = 0.05,
+        init: str = "default",
+        sigma: float = 0.1,
         actor_learning_rate: float | Schedule | None = None,
         critic_learning_rate: float | Schedule | None = None,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
@@ -147,7 +151,7 @@ class DENFACPolicy(BasePolicy):
         normalize_images: bool = True,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
-        n_critics: int = 1,
+        n_critics: int = 2,
     ):
         super().__init__(
             observation_space,

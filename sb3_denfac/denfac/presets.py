@@ -1,28 +1,22 @@
-"""DENFAC's two configurations: the general default and the paper's Algorithm 1, one argument set apart.
+"""DENFAC's one alternative to its default: the paper's Algorithm 1 (:data:`PAPER`), one argument set apart.
 
-``DENFAC("MlpPolicy", env)`` uses the constructor's defaults and :data:`DEFAULT_POLICY_KWARGS`: fitted iterations
-of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose minimum makes the
-targets, wide networks without batch norm, no importance weights (why: the class docstring; measurements:
+``DENFAC("MlpPolicy", env)`` is the library default: the constructor's defaults and :class:`~.policies.DENFACPolicy`'s
+(fitted iterations of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose
+minimum makes the targets, 64-64 networks without batch norm, no importance weights; why: docs/denfac.md, measurements:
 ``benchmarks/results/denfac_ablation/``).
 
-``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common
-values: full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no
-proximal term), one critic, Retrace-style weights, batch norm, N(0, 0.01) weights, Adam step 0.1 with beta1 = 0 (the
-authors' solver), sigma = 0.05. The per-env values of Figure 5
-(D, reset critic, inverting gradients, gamma, actor sizes) are in the zoo YAML entries of the paper's envs.
+``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common values:
+full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no proximal
+term), one critic, Retrace-style weights, batch norm, N(0, 0.01) weights, Adam step 0.1 with beta1 = 0 (the authors'
+solver), sigma = 0.05. The per-env values of Figure 5 (D, reset critic, inverting gradients, gamma, actor sizes, learning
+rates) are in the zoo YAML entries of the paper's envs, which start from this preset (``preset: paper``,
+:mod:`sb3_denfac.zoo.config`).
 """
 
 from __future__ import annotations
 
+import copy
 from typing import Any
-
-#: Policy keyword arguments of ``DENFAC("MlpPolicy", env)`` where ``policy_kwargs`` does not set them.
-DEFAULT_POLICY_KWARGS: dict[str, Any] = {
-    "net_arch": {"pi": [64, 64], "qf": [64, 64]},
-    "batch_norm": False,
-    "init": "default",
-    "n_critics": 2,
-}
 
 #: Constructor arguments that turn the default DENFAC into the paper's Algorithm 1 (section 4, Figure 5).
 PAPER: dict[str, Any] = {
@@ -42,8 +36,18 @@ PAPER: dict[str, Any] = {
 }
 
 
+def with_overrides(preset: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``preset`` with ``overrides``: a mapping in both (``policy_kwargs``, its ``net_arch``) is merged key by key, any
+    other value of ``overrides`` replaces the preset's. Neither argument is modified."""
+    merged = copy.deepcopy(preset)
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = with_overrides(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
 def paper(**overrides: Any) -> dict[str, Any]:
-    """:data:`PAPER` with ``overrides`` (``policy_kwargs`` merged key by key), as constructor arguments."""
-    kwargs = {**PAPER, **overrides}
-    kwargs["policy_kwargs"] = {**PAPER["policy_kwargs"], **overrides.get("policy_kwargs", {})}
-    return kwargs
+    """:data:`PAPER` with ``overrides`` (:func:`with_overrides`), as constructor arguments."""
+    return with_overrides(PAPER, overrides)
