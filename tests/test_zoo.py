@@ -261,10 +261,12 @@ def test_every_yaml_entry_validates(path: Path) -> None:
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)
 def test_every_yaml_entry_builds_a_model(path: Path, tmp_path: Path) -> None:
-    """The zoo's own ExperimentManager turns every entry into a model (values, not only keys, are usable)."""
+    """The zoo's own ExperimentManager (with this package's preset expansion) turns every entry into a model (values,
+    not only keys, are usable)."""
     for env_id in zoo.PACKAGE_ENV_IDS:
-        manager = ExperimentManager(
-            argparse.Namespace(), path.stem, env_id, str(tmp_path), eval_freq=-1, config=str(path), seed=0, verbose=0
+        args = argparse.Namespace(conf_file=str(path))
+        manager = zoo.CheckedExperimentManager(
+            args, path.stem, env_id, str(tmp_path), eval_freq=-1, config=str(path), seed=0, verbose=0
         )
         model, _ = manager.setup_experiment()
         assert isinstance(model, zoo.algorithm_class(path.stem))
@@ -274,8 +276,9 @@ def test_every_yaml_entry_builds_a_model(path: Path, tmp_path: Path) -> None:
 @pytest.mark.parametrize("algo", ["denfac", "td3"])  # td3: the zoo's noise_type / noise_std too
 def test_make_model_builds_what_the_zoo_builds(algo: str, tmp_path: Path) -> None:
     """make_model (quickstart, Figure 3 benchmark) and the zoo's own setup_experiment give the same model from an entry."""
-    manager = ExperimentManager(
-        argparse.Namespace(), algo, ENV, str(tmp_path), eval_freq=-1, config=str(zoo.default_config_path(algo)), seed=3
+    config = str(zoo.default_config_path(algo))
+    manager = zoo.CheckedExperimentManager(
+        argparse.Namespace(conf_file=config), algo, ENV, str(tmp_path), eval_freq=-1, config=config, seed=3
     )
     manager.device, manager.verbose = "cpu", 0
     zoo_model, _ = manager.setup_experiment()
@@ -301,7 +304,7 @@ def test_make_model_names_a_missing_zoo_step(monkeypatch: pytest.MonkeyPatch) ->
 
 def test_paper_figure5_values() -> None:
     denfac = zoo.load_config_file(zoo.default_config_path("denfac"))
-    acrobot, cartpole = denfac["sb3_denfac/ContinuousAcrobot-v0"], denfac["sb3_denfac/ContinuousCartPole-v0"]
+    acrobot, cartpole = (zoo.select_entry(denfac, env) for env in ("sb3_denfac/ContinuousAcrobot-v0", ENV))
     assert (acrobot["buffer_size"], acrobot["reset_critic"], acrobot["inverting_gradients"], acrobot["gamma"]) == (
         6000,
         True,
@@ -312,6 +315,41 @@ def test_paper_figure5_values() -> None:
     assert (cartpole["n_fitted_iterations"], cartpole["actor_steps"], cartpole["actor_learning_rate"]) == (10, 25, 0.1)
     ddpg = zoo.load_config_file(zoo.default_config_path("ddpg"))["sb3_denfac/ContinuousCartPole-v0"]
     assert (ddpg["batch_size"], ddpg["tau"], ddpg["gradient_steps"]) == (64, 0.1, 8)
+
+
+def test_preset_is_expanded_with_the_entry_over_it() -> None:
+    """``preset: paper`` starts from presets.PAPER; the entry's keys win, policy_kwargs (and net_arch) merge key by key;
+    the paper entries of denfac.yml spell only their per-env values and no constructor ever sees ``preset``."""
+    from sb3_denfac.denfac.presets import PAPER
+
+    config = {ENV: {"preset": "paper", "gamma": 0.5, "buffer_size": 6000, "policy_kwargs": {"net_arch": {"pi": [5]}}}}
+    entry = zoo.select_entry(config, ENV)
+    assert "preset" not in entry and config[ENV]["preset"] == "paper"  # the file's mapping is left as read
+    assert (entry["gamma"], entry["buffer_size"], entry["reset_actor"], entry["batch_size"]) == (0.5, 6000, True, None)
+    assert entry["policy_kwargs"] == {**PAPER["policy_kwargs"], "net_arch": {"pi": [5], "qf": [50, 7]}}
+    assert PAPER["policy_kwargs"]["net_arch"] == {"pi": [20], "qf": [50, 7]}  # the preset itself is not modified
+    denfac = zoo.load_config_file(zoo.default_config_path("denfac"))
+    for env_id in zoo.PACKAGE_ENV_IDS:
+        assert denfac[env_id]["preset"] == "paper"
+        assert not {"batch_size", "reset_actor", "weighting", "adam_betas", "actor_proximal"} & set(denfac[env_id])
+        assert "preset" not in zoo.load_hyperparams("denfac", env_id)
+    with pytest.raises(zoo.ZooConfigError, match="Unknown preset 'papr'"):
+        zoo.select_entry({ENV: {"preset": "papr"}}, ENV)
+    with pytest.raises(zoo.ZooConfigError, match="preset 'paper' .* denfac's arguments, not nfac's"):
+        zoo.select_entry(config, ENV, algo="nfac")
+    with pytest.raises(zoo.ZooConfigError, match="policy_kwargs as a YAML mapping"):
+        zoo.select_entry({ENV: {"preset": "paper", "policy_kwargs": "dict(n_critics=2)"}}, ENV)
+
+
+def test_preset_from_the_command_line(tmp_path: Path) -> None:
+    """``-params "preset:'paper'"`` on an entry without a preset trains the paper's DENFAC, the entry's keys kept."""
+    logs = tmp_path / "logs"
+    argv = ["train", "--algo", "denfac", "--env", "Pendulum-v1", "-f", str(logs), "-n", "400", "--eval-freq", "-1"]
+    zoo.main([*argv, "-params", "preset:'paper'", "n_fitted_iterations:1", "critic_steps:2", "actor_steps:2"])
+    (model_path,) = logs.rglob("Pendulum-v1.zip")
+    model = zoo.algorithm_class("denfac").load(model_path, device="cpu")
+    assert (model.batch_size, model.reset_actor, model.actor_proximal, model.n_fitted_iterations) == (None, True, 0.0, 1)
+    assert model.critic.n_critics == 1 and model.policy_kwargs["init"] == "paper"
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -17,6 +17,8 @@ the zoo's tables, then the command goes to ``rl_zoo3.train.train``, ``rl_zoo3.en
 - with ``-optimize`` and no ``--storage``, the study is kept in ``sqlite:///<log-folder>/optuna.db`` under the study
   name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study;
   ``--trial-id`` reads the same study by default;
+- an entry's ``preset`` (e.g. ``preset: paper``) is expanded (:func:`~sb3_denfac.zoo.config.expand_preset`), after the
+  zoo's own reading, so ``-params`` and ``--trial-id`` values override the preset too;
 - the selected YAML entry (after ``-params`` overrides) is checked (:func:`~sb3_denfac.zoo.config.validate_entry`), so
   a typo fails with a clear :class:`~sb3_denfac.zoo.config.ZooConfigError` before any log folder is created;
 - this package's samplers keep the entry's ``policy_kwargs`` (see :mod:`sb3_denfac.zoo.samplers`).
@@ -37,6 +39,7 @@ import json
 import os
 import runpy
 import sys
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,6 +54,7 @@ from sb3_denfac.zoo.config import (
     check_env_id,
     check_env_keys,
     default_config_path,
+    expand_preset,
     load_config_file,
     register,
     select_entry,
@@ -97,9 +101,12 @@ class CheckedExperimentManager(ExperimentManager):
         if is_yaml:
             config = load_config_file(self.config)
             check_env_keys(config, self.config)
-            entry = {**select_entry(config, self.env_name.gym_id, self.config), **(self.custom_hyperparams or {})}
+            entry = {**select_entry(config, self.env_name.gym_id, self.config, self.algo), **(self.custom_hyperparams or {})}
             self.entry_policy_kwargs = entry.get("policy_kwargs", {})
-        hyperparams, saved_hyperparams = super().read_hyperparameters()
+        hyperparams, _ = super().read_hyperparameters()
+        # The zoo's entry (and its -params, --trial-id values) over its preset, before anything uses them.
+        hyperparams = expand_preset(hyperparams, f" ({self.config})", self.algo)
+        saved_hyperparams = OrderedDict((key, hyperparams[key]) for key in sorted(hyperparams))
         if is_yaml:
             name = self.env_name.gym_id if self.env_name.gym_id in config else "default"
             source = f"{self.config}, entry {name!r}"

@@ -3,6 +3,8 @@
 - :func:`register` adds this package's algorithms to ``rl_zoo3.ALGOS`` (the SBX pattern) and their Optuna samplers to
   ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` / ``HYPERPARAMS_CONVERTER``.
 - :func:`load_config_file` reads a zoo YAML file; malformed YAML names the file and the line.
+- :func:`select_entry` picks the entry of an env and expands its ``preset`` (:data:`PRESETS`: ``preset: paper`` starts
+  a DENFAC entry from :data:`sb3_denfac.denfac.presets.PAPER`), so no constructor ever sees ``preset``.
 - :func:`validate_entry` checks one entry the way the zoo will use it: the zoo's own preprocessing turns the entry
   into constructor arguments (so whatever the zoo consumes itself, ``n_timesteps``, ``normalize``, ``noise_type``...,
   needs no list here), the arguments left must be the constructor's (an unknown one is named with the closest valid
@@ -56,6 +58,11 @@ ZOO_PREPROCESSING_STEPS = ("_preprocess_hyperparams", "_preprocess_action_noise"
 
 class ZooConfigError(ValueError):
     """A hyperparameter file or command line that cannot work; raised before anything is trained."""
+
+
+#: ``preset: <name>`` in a YAML entry: the constructor arguments the entry starts from; the entry's own keys override
+#: them, ``policy_kwargs`` merged key by key (:func:`expand_preset`). Name -> (its algorithm, "module:attribute").
+PRESETS: dict[str, tuple[str, str]] = {"paper": ("denfac", "sb3_denfac.denfac.presets:PAPER")}
 
 
 def algorithm_class(name: str) -> type:
@@ -141,12 +148,38 @@ def check_env_keys(config: dict[str, Any], path: str | os.PathLike) -> None:
             check_env_id(str(key), where=f" (a key of {path})")
 
 
-def select_entry(config: dict[str, dict[str, Any]], env_id: str, path: str | os.PathLike = "") -> dict[str, Any]:
-    """The entry the zoo will use for ``env_id``: its own key, else ``default`` (Atari fallback not needed here)."""
-    if env_id in config:
-        return dict(config[env_id])
-    if "default" in config:
-        return dict(config["default"])
+def expand_preset(entry: dict[str, Any], where: str = "", algo: str | None = None) -> dict[str, Any]:
+    """``entry`` with its ``preset`` (:data:`PRESETS`) expanded: the preset's arguments, overridden by the entry's own
+    keys (``policy_kwargs`` and its ``net_arch`` merged key by key); an entry without ``preset`` is returned as it is
+    (a copy). ``algo``, when given, must be the preset's algorithm."""
+    if "preset" not in entry:
+        return dict(entry)
+    from sb3_denfac.denfac.presets import with_overrides
+
+    name = entry["preset"]
+    if name not in PRESETS:
+        raise ZooConfigError(f"Unknown preset {name!r}{where}; presets: {', '.join(PRESETS)}")
+    owner, target = PRESETS[name]
+    if algo is not None and algo != owner:
+        raise ZooConfigError(f"preset {name!r}{where} sets {owner}'s arguments, not {algo}'s")
+    overrides = {key: value for key, value in entry.items() if key != "preset"}
+    if not isinstance(overrides.get("policy_kwargs", {}), dict):
+        raise ZooConfigError(
+            f"With preset {name!r}{where}, write policy_kwargs as a YAML mapping (merged key by key into the preset's), "
+            f"got {overrides['policy_kwargs']!r}"
+        )
+    module_name, attribute = target.split(":")
+    return with_overrides(getattr(importlib.import_module(module_name), attribute), overrides)
+
+
+def select_entry(
+    config: dict[str, dict[str, Any]], env_id: str, path: str | os.PathLike = "", algo: str | None = None
+) -> dict[str, Any]:
+    """The hyperparameters the zoo will use for ``env_id``: its own entry, else ``default`` (Atari fallback not needed
+    here), with its ``preset`` expanded (:func:`expand_preset`; ``algo``, when given, checks the preset's algorithm)."""
+    for key in (env_id, "default"):
+        if key in config:
+            return expand_preset(config[key], f" ({path}, entry {key!r})", algo)
     raise ZooConfigError(
         f"No hyperparameters for {env_id!r} in {path} and no 'default' entry; entries: {', '.join(map(str, config))}"
     )
@@ -308,13 +341,14 @@ def validate_config_file(path: str | os.PathLike, algo: str, check_env_ids: bool
         check_env_keys(config, path)
     for env_id, entry in config.items():
         target = str(env_id) if env_id not in ("default", "atari") else DEFAULT_ENTRY_ENV
-        validate_entry(algo, entry, source=f"{path}, entry {env_id!r}", env_id=target)
+        source = f"{path}, entry {env_id!r}"
+        validate_entry(algo, expand_preset(entry, f" ({source})", algo), source=source, env_id=target)
     return config
 
 
 def load_hyperparams(algo: str, env_id: str, conf_file: str | os.PathLike | None = None) -> dict[str, Any]:
     """The validated YAML entry the zoo would use for (``algo``, ``env_id``), from this package's file by default."""
     path = Path(conf_file) if conf_file is not None else default_config_path(algo)
-    entry = select_entry(load_config_file(path), env_id, path)
+    entry = select_entry(load_config_file(path), env_id, path, algo)
     validate_entry(algo, entry, source=f"{path}, entry {env_id!r}", env_id=env_id)
     return entry
