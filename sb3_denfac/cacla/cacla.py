@@ -60,6 +60,8 @@ class CACLA(DeterministicOnPolicyAlgorithm):
     :param verbose: 0 silent, 1 info, 2 debug.
     :param seed: random seed.
     :param device: torch device.
+    :param torch_threads: torch threads inside ``learn()`` (default 1; None: leave torch's setting alone), restored
+        after it (:mod:`~sb3_denfac.common.threads`).
     :param _init_setup_model: build the networks at construction.
     """
 
@@ -85,6 +87,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         check_positive("n_steps", n_steps, integer=True)
@@ -105,6 +108,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
             verbose=verbose,
             seed=seed,
             device=device,
+            torch_threads=torch_threads,
             _init_setup_model=False,
         )
         self.bn_window = bn_window

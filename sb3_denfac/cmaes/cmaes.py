@@ -22,6 +22,7 @@ from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
 from sb3_denfac.common.budget import budget_reached
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_choice, check_number, check_positive, check_sigma
+from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -39,7 +40,7 @@ class _Randn:
         return self.rng.standard_normal(shape)
 
 
-class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
+class CMAES(InputChecksMixin, TorchThreadsMixin, ProgressBarMixin, BaseAlgorithm):
     """CMA-ES over the weights of the actor network, the actor-only baseline of the DENFAC paper.
 
     Paper: "Data-efficient Neural Fitted Actor-Critic" (Zimmer, Boniface, Dutech), sections 2 and 4: CMA-ES (Hansen
@@ -89,6 +90,8 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
     :param verbose: verbosity level
     :param seed: random seed (also seeds CMA-ES's private generator)
     :param device: torch device
+    :param torch_threads: torch threads inside ``learn()`` (default 1; None: leave torch's setting alone), restored
+        after it (:mod:`~sb3_denfac.common.threads`)
     :param _init_setup_model: build the policy and the search at construction
     """
 
@@ -111,6 +114,7 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         super().__init__(
@@ -130,6 +134,7 @@ class CMAES(InputChecksMixin, ProgressBarMixin, BaseAlgorithm):
         self.sigma0 = check_positive("sigma0 (initial CMA-ES step size)", sigma0)
         self.n_eval_episodes = check_positive("n_eval_episodes", n_eval_episodes, integer=True)
         self.sigma = check_sigma(sigma, zero_ok=True)  # 0 = deterministic candidates
+        self.torch_threads = check_torch_threads(torch_threads)
         self.incumbent = check_choice("incumbent", incumbent, INCUMBENTS)
         self.cma_options = dict(cma_options or {})
         # Search state (saved): the CMA-ES object, the unfinished generation, the best candidate so far.

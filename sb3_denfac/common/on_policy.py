@@ -32,6 +32,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_denfac.common.actor_value_policy import DeterministicActorValuePolicy
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
+from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.compat import ON_POLICY_TORCH_NAMES_0_2, LegacyTorchNamesMixin
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 
@@ -79,7 +80,7 @@ class TransitionBuffer:
 
 
 class DeterministicOnPolicyAlgorithm(
-    InputChecksMixin, ProgressBarMixin, LegacyTorchNamesMixin, ActorCriticRatesMixin, OnPolicyAlgorithm
+    InputChecksMixin, TorchThreadsMixin, ProgressBarMixin, LegacyTorchNamesMixin, ActorCriticRatesMixin, OnPolicyAlgorithm
 ):
     """Base of NFAC and CACLA: an :class:`OnPolicyAlgorithm` whose rollouts explore with a truncated Gaussian around
     mu(s) and store (s, a, mu_b(s), r, s', terminal). Subclasses choose when a rollout ends (``_rollout_done``), may
@@ -103,6 +104,8 @@ class DeterministicOnPolicyAlgorithm(
     :param verbose: 0 silent, 1 info, 2 debug.
     :param seed: random seed.
     :param device: torch device.
+    :param torch_threads: torch threads inside ``learn()`` (default 1; None: leave torch's setting alone), restored
+        after it (:mod:`~sb3_denfac.common.threads`).
     :param _init_setup_model: build the networks at construction.
     """
 
@@ -128,6 +131,7 @@ class DeterministicOnPolicyAlgorithm(
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         sigma = check_sigma(sigma)
@@ -160,6 +164,7 @@ class DeterministicOnPolicyAlgorithm(
         self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
         self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.sigma = sigma
+        self.torch_threads = check_torch_threads(torch_threads)
         if _init_setup_model:
             self._setup_model()
 

@@ -21,11 +21,13 @@ from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.networks import set_bn_training_mode
+from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.ddpg.policies import DDPGPolicy, MlpPolicy
 
 
 class DDPG(
     InputChecksMixin,
+    TorchThreadsMixin,
     ProgressBarMixin,
     StopAtTotalTimestepsMixin,
     ActorCriticRatesMixin,
@@ -86,6 +88,8 @@ class DDPG(
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
+    :param torch_threads: torch threads inside ``learn()`` (default 1; None: leave torch's setting alone), restored
+        after it (:mod:`~sb3_denfac.common.threads`)
     :param _init_setup_model: build the networks at construction
     """
 
@@ -118,6 +122,7 @@ class DDPG(
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         super().__init__(
@@ -144,6 +149,7 @@ class DDPG(
             _init_setup_model=False,
         )
         self.sigma = check_sigma(sigma, none_ok=True)
+        self.torch_threads = check_torch_threads(torch_threads)
         self.learning_rate = check_learning_rate("learning_rate", learning_rate)
         self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
         self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)

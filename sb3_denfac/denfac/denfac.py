@@ -32,6 +32,7 @@ from sb3_denfac.common.compat import (
 )
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
+from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.options import check_options, fitted_iterations
@@ -45,6 +46,7 @@ WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
 
 class DENFAC(
     InputChecksMixin,
+    TorchThreadsMixin,
     ProgressBarMixin,
     StopAtTotalTimestepsMixin,
     ActorCriticRatesMixin,
@@ -112,6 +114,8 @@ class DENFAC(
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
+    :param torch_threads: torch threads inside ``learn()`` (default 1: tiny networks; None: leave torch's setting
+        alone); the caller's setting is restored when ``learn()`` returns (:mod:`~sb3_denfac.common.threads`)
     :param _init_setup_model: whether to build the networks at construction
     """
 
@@ -157,6 +161,7 @@ class DENFAC(
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True)
@@ -204,6 +209,7 @@ class DENFAC(
                 f"DENFAC updates at the end of every episode and needs a single environment, got n_envs={self.n_envs}"
             )
         self.sigma = check_sigma(sigma)
+        self.torch_threads = check_torch_threads(torch_threads)
         self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
         self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
         self.n_fitted_iterations = n_fitted_iterations

@@ -69,6 +69,8 @@ class NFAC(DeterministicOnPolicyAlgorithm):
     :param verbose: 0 silent, 1 info, 2 debug.
     :param seed: random seed.
     :param device: torch device.
+    :param torch_threads: torch threads inside ``learn()`` (default 1; None: leave torch's setting alone), restored
+        after it (:mod:`~sb3_denfac.common.threads`).
     :param _init_setup_model: build the networks at construction.
     """
 
@@ -98,6 +100,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         verbose: int = 0,
         seed: int | None = None,
         device: th.device | str = "auto",
+        torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
         for name, value in (
@@ -123,6 +126,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
             verbose=verbose,
             seed=seed,
             device=device,
+            torch_threads=torch_threads,
             _init_setup_model=False,
         )
         self.n_episodes = n_episodes
