@@ -14,9 +14,9 @@ reaches the goal (0.99), and by the best height within the horizon:
 
 The goal is checked at every decision (as the env does) and, with ``--substeps`` > 1, also at intermediate integration
 points (the authors' reward takes the maximum over the 20 ODE steps of a decision).
-Writes ``benchmarks/results/acrobot_horizon.{json,md}``.
+Writes ``benchmarks/results/acrobot_horizon/acrobot_horizon.{json,md}``.
 
-Usage: ``python benchmarks/acrobot_horizon.py [--horizon 75] [--restarts 6] [--generations 300]``
+Usage: ``python -m benchmarks.acrobot_horizon [--horizon 75] [--restarts 6] [--generations 300]``
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parent / "results" / "acrobot_horizon"
 GOAL = 0.99
 
 
@@ -169,7 +169,7 @@ def replay_on_env(row: dict, horizon: int, max_torque: float) -> float | None:
     return None
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--horizon", type=int, default=75)
     parser.add_argument("--max-torque", type=float, default=1.5)
@@ -180,7 +180,8 @@ def main() -> None:
     parser.add_argument("--generations", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--tag", default="")
-    args = parser.parse_args()
+    parser.add_argument("--output", default=str(RESULTS), help="results folder")
+    args = parser.parse_args(argv)
     start = time.process_time()
     sim = Acrobot(args.max_torque, args.substeps)
     rows = energy_pumping(sim, 500)  # their full-length reference: how long the classic pumping needs
@@ -189,8 +190,8 @@ def main() -> None:
     rows.append({**grid, "horizon": args.horizon, "replayed_on_env": replay_on_env(grid, args.horizon, args.max_torque)})
     rows.append({**cmaes_open_loop(sim, args.horizon, args.restarts, args.generations, args.seed), "horizon": args.horizon})
     out = {"args": vars(args), "goal_height": GOAL, "cpu_seconds": time.process_time() - start, "results": rows}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    stem = RESULTS / f"acrobot_horizon{args.tag}"
+    Path(args.output).mkdir(parents=True, exist_ok=True)
+    stem = Path(args.output) / f"acrobot_horizon{args.tag}"
     stem.with_suffix(".json").write_text(json.dumps(out, indent=1))
     lines = [
         f"# Acrobot goal within {args.horizon} decisions (max_torque {args.max_torque} N m, goal height {GOAL}, "
@@ -205,7 +206,7 @@ def main() -> None:
         if "switches" in r:
             what = f"start {r['first']:+.0f}, switch after decisions {r['switches']}; on the env: {r['replayed_on_env']}"
         lines.append(f"| {r['family']} | {what} | {r.get('horizon', 500)} | {steps} | {r['best_height']:.4f} |")
-    lines += ["", f"CPU seconds: {out['cpu_seconds']:.0f}. Command: `python benchmarks/acrobot_horizon.py` with {vars(args)}."]
+    lines += ["", f"CPU seconds: {out['cpu_seconds']:.0f}. Command: `python -m benchmarks.acrobot_horizon` with {vars(args)}."]
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -20,7 +20,8 @@ repeat from copies of the same saved model and buffer.
 ``--training-run`` also times every update of a quickstart-like run (Acrobot, 50 episodes, seed 0) and reports the
 median and the slowest.
 
-Usage: ``python benchmarks/update_cost.py [--repeats 9] [--threads 1 2] [--envs acrobot half_cheetah] [--training-run]``
+Results: ``results/update_cost/update_cost.{json,md}``. Usage:
+``python -m benchmarks.update_cost [--repeats 9] [--threads 1 2] [--envs acrobot half_cheetah] [--training-run]``
 """
 
 from __future__ import annotations
@@ -29,8 +30,6 @@ import argparse
 import contextlib
 import json
 import os
-import platform
-import subprocess
 import tempfile
 import time
 from collections import Counter
@@ -40,7 +39,9 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-RESULTS = Path(__file__).resolve().parent / "results"
+from benchmarks.task import git_state, machine_info
+
+RESULTS = Path(__file__).resolve().parent / "results" / "update_cost"
 ENVS = {
     "acrobot": "sb3_denfac/ContinuousAcrobot-v0",
     "cartpole": "sb3_denfac/ContinuousCartPole-v0",
@@ -298,23 +299,24 @@ def write_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="torch thread counts, each a full run")
     parser.add_argument("--envs", nargs="+", default=["acrobot", "half_cheetah"], choices=list(ENVS))
     parser.add_argument("--training-run", action="store_true", help="also time every update of a 50-episode run")
+    parser.add_argument("--episodes", type=int, default=None, help="training episodes before the trained buffer")
     parser.add_argument("--output", default=str(RESULTS / "update_cost"), help="results path without extension")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     th.set_num_threads(1)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     results: dict = dict(
         meta=dict(
             threads=args.threads,
             repeats=args.repeats,
             torch=th.__version__,
-            commit=commit or "unknown",
-            machine=f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores (shared with other jobs)",
+            commit=git_state().get("commit", "unknown")[:10],
+            git=git_state(),
+            machine=machine_info(),
             load_average=os.getloadavg(),
         ),
         runs=[],
@@ -329,7 +331,7 @@ def main() -> None:
         output.with_suffix(".md").write_text(write_markdown(results))
 
     with tempfile.TemporaryDirectory() as tmp:
-        buffers = {name: make_buffers(name, Path(tmp), TRAINED_EPISODES[name]) for name in args.envs}
+        buffers = {name: make_buffers(name, Path(tmp), args.episodes or TRAINED_EPISODES[name]) for name in args.envs}
         for threads in args.threads:
             th.set_num_threads(threads)
             for name, paths in buffers.items():

@@ -3,9 +3,9 @@
 For each env, a default DENFAC (two critics) is trained for ``--episodes`` episodes; its replay buffer is then given to
 fresh default models with ``n_critics`` 1 and 2 (fast updater, the default's), and one update of each is timed, the two
 interleaved in every repeat, with one torch thread: the ratio is what the second critic costs per update, measured side
-by side on the same real data. Results: ``results/update_cost_critics.{json,md}`` (commit, machine, load, medians).
+by side on the same real data. Results: ``results/update_cost/update_cost_critics.{json,md}`` (commit, machine, load, medians).
 
-Usage: ``python benchmarks/update_cost_critics.py [--repeats 7] [--episodes 20] [--envs Pendulum-v1 ...]``
+Usage: ``python -m benchmarks.update_cost_critics [--repeats 7] [--episodes 20] [--envs Pendulum-v1 ...]``
 """
 
 from __future__ import annotations
@@ -20,11 +20,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch as th
-from figure3_run import git_state, machine_info
 
+from benchmarks.task import git_state, machine_info
+from benchmarks.update_cost import RESULTS
 from sb3_denfac import DENFAC
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def timed_update(model: DENFAC) -> float:
@@ -55,13 +54,13 @@ def measure(env_id: str, episodes: int, repeats: int, folder: Path) -> dict:
     )
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--envs", nargs="+", default=["Pendulum-v1", "InvertedPendulum-v5", "sb3_denfac/HalfCheetahPaper-v0"])
     parser.add_argument("--output", default=str(RESULTS / "update_cost_critics"))
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     th.set_num_threads(1)
     meta = dict(git=git_state(), machine=machine_info(), load_average_start=os.getloadavg())
     meta |= dict(repeats=args.repeats, episodes=args.episodes)

@@ -1,9 +1,9 @@
 """One fast DENFAC update at 1 and 2 torch threads, interleaved, on a real (trained) Acrobot buffer.
 
 Run it with the other core busy and idle to see whether two threads help or collapse on a shared 2-core machine.
-Writes ``benchmarks/results/update_threads.json`` (appends one record per run: load average, times, medians).
+Writes ``benchmarks/results/update_cost/update_threads.json`` (appends one record per run: load average, times, medians).
 
-Usage: ``python benchmarks/update_threads.py [--repeats 5] [--episodes 10]``
+Usage: ``python -m benchmarks.update_threads [--repeats 5] [--episodes 10]``
 """
 
 from __future__ import annotations
@@ -11,21 +11,23 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import torch as th
-from update_cost import RESULTS, load_denfac, make_buffers
+
+from benchmarks.task import git_state
+from benchmarks.update_cost import RESULTS, load_denfac, make_buffers
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--episodes", type=int, default=10, help="training episodes before the trained buffer")
-    args = parser.parse_args()
+    parser.add_argument("--output", default=str(RESULTS / "update_threads.json"), help="JSON file to append to")
+    args = parser.parse_args(argv)
     th.set_num_threads(1)
     with tempfile.TemporaryDirectory() as tmp:
         path = make_buffers("acrobot", Path(tmp), args.episodes)["trained"]
@@ -38,15 +40,14 @@ def main() -> None:
                 start = time.perf_counter()
                 model._update()
                 times[threads].append(time.perf_counter() - start)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     record = dict(
-        commit=commit,
+        commit=git_state().get("commit", "unknown")[:10],
         load_average_start=load_start,
         load_average_end=os.getloadavg(),
         times_s=times,
         median_s={threads: float(np.median(t)) for threads, t in times.items()},
     )
-    out = RESULTS / "update_threads.json"
+    out = Path(args.output)
     records = json.loads(out.read_text()) if out.is_file() else []
     out.write_text(json.dumps([*records, record], indent=1))
     print(json.dumps(record))

@@ -2,9 +2,9 @@
 
 import gymnasium as gym
 import pytest
-import update_cost
 from torch.utils.flop_counter import FlopCounterMode
 
+from benchmarks import update_cost
 from sb3_denfac import DENFAC
 
 

@@ -109,6 +109,25 @@ ENV_FACTS: dict[str, EnvFacts] = {
             score_range=(0.0, 1000.0),
             label="InvertedPendulum-v5 (return, higher is better)",
         ),
+        # Held-out envs of the benchmark: no threshold of our own; Gymnasium's reward_threshold where it has one.
+        EnvFacts(
+            "hopper",
+            "Hopper-v5",
+            gamma=None,
+            measure="episode return (at most 1000 steps; ends when the hopper falls)",
+            threshold=3800.0,
+            threshold_meaning="Gymnasium's reward_threshold",
+            label="Hopper-v5 (return, higher is better)",
+        ),
+        EnvFacts(
+            "reacher",
+            "Reacher-v5",
+            gamma=None,
+            measure="episode return (50 steps)",
+            threshold=-3.75,
+            threshold_meaning="Gymnasium's reward_threshold",
+            label="Reacher-v5 (return, higher is better)",
+        ),
     )
 }
 

@@ -1,0 +1,294 @@
+"""Analysis of a study's runs: tables (pandas), aggregates and verdicts (rliable), plots; one report per suite.
+
+Reads the study's compact runs file (``<results>/runs.jsonl.gz``, ``benchmarks.store``) and writes next to it:
+``runs.csv`` (one line per run, with its measures), and for every suite of the study with finished runs
+``<suite>.md`` (tables, aggregates, verdicts), ``<suite>.png`` (curves), ``<suite>_compute.png`` (best-so-far against
+CPU seconds) and ``<suite>_profile.png`` (performance profile); ``all_runs.md`` covers every finished run.
+
+Usage: ``python -m benchmarks.analysis --results benchmarks/results/sweep``
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks import plots, store, verdicts
+from benchmarks import stats as st
+from benchmarks.suites import ALGOS, SUITES, Suite, estimated_cost
+from sb3_denfac.common.performance import fall_back_fraction
+from sb3_denfac.envs.facts import env_facts
+
+RUN_FIELDS = [
+    *("algo", "env", "seed", "episodes", "timesteps", "cpu_time", "eval_cpu_time", "wall_time", "final_best", "last10"),
+    *("final_eval", "episodes_to_threshold", "fall_back", "cpu_per_episode", "gradient_steps", "trained"),
+    *("hyperparams_source", "commit"),
+]
+
+
+def _learning_starts(meta: dict) -> int:
+    with_value = meta.get("hyperparams", {}).get("learning_starts")
+    return int(ast.literal_eval(with_value)) if with_value is not None else 0
+
+
+def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(episodes, runs) of the finished runs of the study's runs file: per (algo, env, seed), its longest budget."""
+    episode_frames, run_rows = [], []
+    longest: dict[tuple, dict] = {}
+    for record in store.read_runs(results_dir):
+        cell = store.cell_of(record)[:3]
+        if cell not in longest or record["episodes_requested"] > longest[cell]["episodes_requested"]:
+            longest[cell] = record
+    for meta in longest.values():
+        eps = pd.DataFrame(meta["episodes"])
+        eps = eps.astype({c: float for c in ("performance", "best_so_far", "cpu_time") if c in eps})
+        eps.insert(0, "seed", int(meta["seed"]))
+        eps.insert(0, "env", meta["env"])
+        eps.insert(0, "algo", meta["algo"])
+        episode_frames.append(eps)
+        facts = env_facts(meta["env"])
+        hits = eps.loc[eps["best_so_far"].map(facts.reached), "episode"]
+        evaluations = meta.get("evaluations") or []
+        run_rows.append(
+            {
+                **{k: meta.get(k) for k in ("algo", "env", "seed", "timesteps", "cpu_time", "eval_cpu_time", "wall_time")},
+                "gradient_steps": meta.get("gradient_steps"),
+                "episodes": len(eps),
+                "final_best": float(eps["best_so_far"].iloc[-1]) if len(eps) else np.nan,
+                "last10": float(eps["performance"].tail(10).mean()),
+                "final_eval": float(np.mean(evaluations[-1]["scores"])) if evaluations else np.nan,
+                "episodes_to_threshold": float(hits.iloc[0]) if len(hits) else np.nan,
+                "fall_back": fall_back_fraction(
+                    eps["performance"],
+                    facts.lower_is_better,
+                    eps["performance"].map(facts.reached),
+                    facts.score_range[0] if facts.score_range else None,
+                ),
+                "cpu_per_episode": float(meta.get("cpu_time", np.nan)) / max(len(eps), 1),
+                # A run trained if its model updated at all: more steps than the warm-up, and a second episode.
+                "trained": bool(meta.get("timesteps", 0) > _learning_starts(meta) and len(eps) >= 2),
+                "hyperparams_source": meta.get("hyperparams_source", ""),
+                "commit": (meta.get("git") or {}).get("commit", "")[:10],
+            }
+        )
+    episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame()
+    return episodes, pd.DataFrame(run_rows, columns=RUN_FIELDS)
+
+
+def _order(algos) -> list[str]:
+    known = list(ALGOS)
+    return sorted(set(algos), key=lambda a: (known.index(a) if a in known else len(known), a))
+
+
+def _env_order(envs) -> list[str]:
+    known = list(SUITES["figure3"].envs)
+    return sorted(set(envs), key=lambda e: (known.index(e) if e in known else len(known), e))
+
+
+def _quartiles(values: pd.Series, digits: int = 1) -> str:
+    values = values.dropna()
+    if values.empty:
+        return "–"
+    q1, med, q3 = values.quantile([0.25, 0.5, 0.75])
+    return f"{med:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
+
+
+def _worst(facts) -> str:
+    return f"{facts.score_range[0]:g}" if facts.score_range else "the run's worst episode"
+
+
+def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
+    """One row per algorithm: runs, seeds, and median [Q1, Q3] of each measure, threshold reached, CPU cost."""
+    facts = env_facts(env)
+    rows = []
+    for algo in _order(runs.loc[runs["env"] == env, "algo"]):
+        r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
+        reached = r["episodes_to_threshold"].notna()
+        rows.append(
+            {
+                "algo": ALGOS[algo].label if algo in ALGOS else algo,
+                "runs (seeds)": f"{len(r)} ({_seed_list(r['seed'])})",
+                "best so far": _quartiles(r["final_best"]),
+                "last-10 mean": _quartiles(r["last10"]),
+                "deterministic eval (last)": _quartiles(r["final_eval"]),
+                "threshold: episodes (reached/runs)": (
+                    f"{r.loc[reached, 'episodes_to_threshold'].median():.0f} ({reached.sum()}/{len(r)})"
+                    if reached.any()
+                    else f"– (0/{len(r)})"
+                )
+                if facts.threshold is not None
+                else "",
+                "fall-back fraction": _quartiles(r["fall_back"], 2) if facts.threshold is not None else "",
+                "CPU s per run": _quartiles(r["cpu_time"], 0),
+                "CPU s per episode": _quartiles(r["cpu_per_episode"], 2),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def _seed_list(seeds: pd.Series) -> str:
+    s = sorted(int(x) for x in seeds)
+    return f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) and len(s) > 2 else ",".join(map(str, s))
+
+
+def settings_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """What each algorithm was given on each env: the YAML entry the runs were built from."""
+    table = runs.groupby(["algo", "env"])["hyperparams_source"].agg(lambda s: "; ".join(sorted(set(s)))).unstack("env")
+    table = table.reindex(index=_order(table.index), columns=_env_order(table.columns)).fillna("–")
+    table.index = [ALGOS[a].label if a in ALGOS else a for a in table.index]
+    return table.rename_axis("algo").reset_index()
+
+
+def _md(df: pd.DataFrame) -> str:
+    return df.to_markdown(index=False) if not df.empty else "(no runs)"
+
+
+def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
+    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the CPU hours still needed: the median
+    CPU seconds of the cell's finished runs times the seeds left, or where it has none, the plan's estimate
+    (``benchmarks.cost``, full-length episodes: an upper bound where episodes end early), marked <=."""
+    done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
+    measured = runs.groupby(["algo", "env"])["cpu_time"].median().to_dict() if not runs.empty else {}
+    rows = {}
+    for algo in suite.algos:
+        want = suite.seeds(algo)
+        row, hours = {}, 0.0
+        for env in suite.envs:
+            left = sum((algo, env, s) not in done for s in want)
+            per_run = measured.get((algo, env), estimated_cost(algo, env))
+            cost = left * per_run / 3600
+            hours += cost
+            bound = "" if (algo, env) in measured else "<="
+            row[env] = f"{len(want) - left}/{len(want)}" + (f", {bound}{cost:.2f} h" if left and np.isfinite(cost) else "")
+        if hours != 0.0:
+            rows[ALGOS[algo].label] = {**row, "CPU hours left": f"{hours:.2f}"}
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
+
+
+def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, stem: str, suite: Suite | None = None) -> str:
+    """The markdown of one report; writes its three plots ``<stem>.png``, ``<stem>_compute.png``, ``<stem>_profile.png``."""
+    lines = [f"# {title}", ""]
+    if suite is not None:
+        missing = missing_cells(suite, runs)
+        lines += [f"Suite `{suite.name}`: {suite.description}.", ""]
+        lines += (
+            [
+                "Cells not complete (finished/wanted seeds, CPU hours to finish: from the cell's finished runs, "
+                "or <= the plan's full-length estimate where it has none):",
+                "",
+                _md(missing),
+                "",
+            ]
+            if not missing.empty
+            else ["Every cell is complete.", ""]
+        )
+    excluded = runs[~runs["trained"]]
+    if not excluded.empty:
+        lines += ["Runs left out because their model never trained (budget within the warm-up):", "",
+                  _md(excluded[["algo", "env", "seed", "timesteps", "hyperparams_source"]]), ""]  # fmt: skip
+    runs = runs[runs["trained"]]
+    if runs.empty:
+        return "\n".join([*lines, "No finished run has trained yet.", ""])
+    episodes = episodes.merge(runs[["algo", "env", "seed"]], on=["algo", "env", "seed"])
+    envs, algos = _env_order(runs["env"]), _order(runs["algo"])
+    commits = sorted(set(runs["commit"]))
+    lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
+    plots.curves(episodes, envs, algos, out / f"{stem}.png")
+    plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")
+    lines += [f"![curves]({stem}.png)", "", f"![compute]({stem}_compute.png)", ""]
+    lines += ["## What each algorithm was given (YAML entry per env)", "", _md(settings_table(runs)), ""]
+    for env in envs:
+        facts = env_facts(env)
+        direction = "lower is better" if facts.lower_is_better else "higher is better"
+        budget = int(runs.loc[runs["env"] == env, "episodes"].max())
+        lines += [f"## {env} (`{facts.gym_id}`, {facts.measure}, {direction}; {budget} episodes)", ""]
+        if facts.threshold is not None:
+            op = "<" if facts.lower_is_better else ">="
+            lines += [f"Threshold: best so far {op} {facts.threshold:g} ({facts.threshold_meaning}). Fall-back fraction: "
+                      "of the episodes after the first that reached it, the share below half the best so far (halfway "
+                      f"from {_worst(facts)}).", ""]  # fmt: skip
+        lines += [_md(env_table(runs, env)), ""]
+    lines += aggregates(runs, envs, out, stem)
+    if suite is None or suite.name == "figure3":
+        table = verdicts.verdict_table(runs)
+        if not table.empty:
+            lines += ["## Verdicts", "", verdicts.RULES, "", _md(table), ""]
+    return "\n".join(lines)
+
+
+def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> list[str]:
+    """IQM (normalised, over envs) per measure, probability of improvement of DENFAC over each algorithm, profile."""
+    lines = ["## Aggregates over envs (rliable)", ""]
+    notes = [f"{e}: {env_facts(e).score_range}" if env_facts(e).score_range else f"{e}: min-max over these runs" for e in envs]
+    lines += ["Normalisation (worst, best) per env: " + "; ".join(notes) + ". Each algorithm's IQM uses the seeds it has on "
+              "every env listed; 95% stratified-bootstrap intervals.", ""]  # fmt: skip
+    for measure, meaning in st.MEASURES.items():
+        iqm = st.iqm_table(runs, envs, measure)
+        if iqm.empty:
+            continue
+        iqm = iqm.set_index("algo").loc[_order(iqm["algo"])].reset_index()
+        iqm["algo"] = [ALGOS[a].label if a in ALGOS else a for a in iqm["algo"]]
+        iqm["IQM [95% CI]"] = [
+            f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
+        ]
+        lines += [f"IQM of the normalised {meaning}:", "", _md(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
+    for denfac in ("denfac", "denfac_default"):
+        if denfac not in set(runs["algo"]):
+            continue
+        rows = []
+        for other in _order(runs["algo"]):
+            if other == denfac:
+                continue
+            row = {"other": ALGOS[other].label if other in ALGOS else other}
+            for measure in st.MEASURES:
+                shared = [e for e in envs if {denfac, other} <= set(runs.loc[runs["env"] == e, "algo"])]
+                p, lo, hi, na, nb = st.probability_of_improvement(runs, denfac, other, shared, measure)
+                row[f"P(improvement), {measure}"] = (
+                    f"{p:.2f} [{lo:.2f}, {hi:.2f}] ({na} vs {nb} seeds)" if np.isfinite(p) else "–"
+                )
+            rows.append(row)
+        lines += [f"Probability that {ALGOS[denfac].label} beats each algorithm, averaged over the envs both ran:", "",
+                  _md(pd.DataFrame(rows)), ""]  # fmt: skip
+    values = st.normalised(runs, "final_best")
+    scores = {a: st.score_matrix(runs, a, envs, values) for a in _order(runs["algo"])}
+    plots.performance_profile(
+        scores, out / f"{stem}_profile.png", "Performance profile: normalised best-so-far at the budget", st.REPS
+    )
+    lines += [f"![performance profile]({stem}_profile.png)", ""]
+    return lines
+
+
+def analyse(results_dir: str | Path) -> str:
+    """Write runs.csv and the reports of the study's suites in ``results_dir``; return the ``all_runs`` markdown."""
+    out = Path(results_dir)
+    episodes, runs = load(out)
+    if runs.empty:
+        raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")
+    runs.to_csv(out / "runs.csv", index=False)
+    for suite in SUITES.values():
+        if suite.study == "ablation":  # its tables: benchmarks.ablation_analysis
+            continue
+        cells = {(a, e, s) for a, e, s in suite.cells()}
+        mine = runs[[c in cells for c in zip(runs["algo"], runs["env"], runs["seed"], strict=True)]]
+        if not mine.empty:
+            text = report(f"Benchmark suite `{suite.name}`", episodes, mine, out, suite.name, suite)
+            (out / f"{suite.name}.md").write_text(text)
+    text = report("All finished runs", episodes, runs, out, "all_runs")
+    (out / "all_runs.md").write_text(text)
+    return text
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--results", default=str(Path(__file__).parent / "results" / "sweep"), help="the study's folder")
+    args = parser.parse_args(argv)
+    print(analyse(args.results))
+
+
+if __name__ == "__main__":
+    main()

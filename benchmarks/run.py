@@ -1,0 +1,313 @@
+"""The benchmark runner: (row, env, seed) cells, each trained for a budget of episodes; resumable, local or on Ray.
+
+Cells come from a suite (``--suite figure3``, ``generalisation``, ``matched``, ``ablation``...: ``benchmarks/suites.py``)
+and/or ``--algos/--envs/--seeds``. Each run (``benchmarks.task.run_one``) trains ``ALGO("MlpPolicy", env,
+**hyperparams)`` with its row's settings and is appended, when it ends, to the study's compact runs file
+``<results>/runs.jsonl.gz`` (``benchmarks.store``). A rerun skips the cells already there, so an interrupted sweep
+resumes where it stopped. At the end, ``benchmarks.analysis`` writes the study's tables and plots.
+
+Examples::
+
+    python -m benchmarks.run --suite figure3 --workers 0                  # the whole sweep, in this process
+    python -m benchmarks.run --suite generalisation --envs pendulum       # one env of a suite
+    python -m benchmarks.run --algos td3 sac --envs cartpole --seeds 0 1 --episodes 50 --workers 2
+    python -m benchmarks.run --suite ablation --algos abl:default abl:faithful   # part of the ablation study
+    python -m benchmarks.run --suite figure3 --ray-address HOST:6379      # on a Ray cluster (pip install ray)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from benchmarks import analysis as analysis_module
+from benchmarks import store, suites
+from benchmarks import task as task_module
+
+RESULTS_ROOT = Path(__file__).resolve().parent / "results"
+
+
+def default_results_dir(suite: str | None) -> Path:
+    """``results/<study>/``: the study of the suite (suites of one study share their runs), else ``results/sweep``."""
+    study = suites.SUITES[suite].study if suite in suites.SUITES else "sweep"
+    return RESULTS_ROOT / study
+
+
+def write_zoo_evaluations(record: dict[str, Any], zoo_dir: Path) -> None:
+    """``evaluations.npz`` in the zoo's layout (``<algo>/<env-id>_<seed>/``) so ``rl_zoo3.plots.all_plots`` reads it.
+
+    ``results`` holds each *training* episode's paper measure (one column), ``ep_lengths`` its length, ``timesteps``
+    the step count at its end; ``best_so_far`` (use ``--key best_so_far``) is the Figure 3 measure.
+    """
+    import numpy as np
+
+    eps = record["episodes"]
+    folder = zoo_dir / record["algo"].replace(":", "-") / f"{record['gym_id'].replace('/', '-')}_{record['seed']}"
+    folder.mkdir(parents=True, exist_ok=True)
+    np.savez(
+        folder / "evaluations.npz",
+        timesteps=np.array(eps["timesteps"], dtype=np.int64),
+        results=np.array(eps["performance"], dtype=np.float64)[:, None],
+        ep_lengths=np.array(eps["length"], dtype=np.int64)[:, None],
+        best_so_far=np.array(eps["best_so_far"], dtype=np.float64)[:, None],
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------- sweep
+
+
+def _init_worker() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _run_local(tasks: list[dict[str, Any]], workers: int, on_result: Callable[[dict[str, Any]], None]) -> None:
+    if workers <= 0:
+        for task in tasks:
+            on_result(task_module.run_one(task))
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    # spawn: fresh interpreters (no inherited torch thread pools), same behaviour on Linux and macOS
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker) as pool:
+        try:
+            futures = [pool.submit(task_module.run_one, task) for task in tasks]
+            for future in as_completed(futures):
+                on_result(future.result())
+        except BaseException:  # interrupted (Ctrl-C, SIGTERM): do not leave workers training in the background
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dict[str, Any]], None]) -> None:
+    try:
+        import ray
+    except ImportError as e:
+        raise SystemExit(
+            "--ray-address needs Ray, which is not installed: pip install 'sb3-denfac[distributed]' (or pip install ray). "
+            "Every node of the cluster also needs sb3-denfac installed."
+        ) from e
+    # Ship the run's code by value so cluster nodes need only the installed package, not this checkout.
+    from benchmarks import diagnostics
+
+    for module in (task_module, diagnostics):
+        ray.cloudpickle.register_pickle_by_value(module)
+    ray.init(address=None if address == "local" else address, ignore_reinit_error=True)
+    try:
+        # A task whose worker or node dies is retried (max_retries) on the nodes left or on one that joins later.
+        remote = ray.remote(num_cpus=1, max_retries=3)(task_module.run_one)
+        task_of = {remote.remote(task): task for task in tasks}
+        pending = list(task_of)
+        while pending:  # results come back to this driver, which alone writes the runs file
+            done, pending = ray.wait(pending, num_returns=1)
+            try:
+                on_result(ray.get(done[0]))
+            except ray.exceptions.RayError as error:  # retries exhausted: recorded as failed, redone by a rerun
+                task = task_of[done[0]]
+                key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+                on_result({**key, "status": "failed", "error": f"{type(error).__name__}: {error}", "log": ""})
+    finally:
+        ray.shutdown()  # disconnects from a cluster; stops a "local" one
+
+
+def select_cells(
+    suite: str | None = None,
+    algos: Sequence[str] | None = None,
+    envs: Sequence[str] | None = None,
+    seeds: Sequence[int] | None = None,
+) -> list[tuple[str, str, int]]:
+    """The (algo, env, seed) cells of ``suite`` restricted to ``algos/envs/seeds``, or (no suite) their product.
+
+    Ordered seed by seed, so a sweep stopped early has every (algo, env) at its first seeds."""
+    if suite is not None:
+        if suite not in suites.SUITES:
+            raise ValueError(f"unknown --suite {suite!r}; choose from {sorted(suites.SUITES)}")
+        cells = suites.SUITES[suite].cells()
+        return [
+            (a, e, s)
+            for a, e, s in cells
+            if (algos is None or a in algos) and (envs is None or e in envs) and (seeds is None or s in seeds)
+        ]
+    if not (algos and envs and seeds is not None):
+        raise ValueError("give --suite, or --algos, --envs and --seeds")
+    unknown = [a for a in algos if a not in suites.ALGOS]
+    if unknown:
+        raise ValueError(f"unknown --algos {unknown}; choose from {list(suites.ALGOS)}")
+    return [(a, e, int(s)) for s in seeds for e in envs for a in algos]
+
+
+def sweep(
+    algos: Sequence[str] | None = None,
+    envs: Sequence[str] | None = None,
+    seeds: Sequence[int] | None = None,
+    episodes: int | dict[str, int] | None = None,
+    suite: str | None = None,
+    results_dir: str | Path | None = None,
+    hyperparams_dirs: Sequence[str | Path] = (),
+    workers: int = 1,
+    ray_address: str | None = None,
+    zoo_logs: str | Path | None = None,
+    analysis: bool = True,
+    verbose: int = 1,
+) -> dict[str, list]:
+    """Run the cells of :func:`select_cells` that ``results_dir`` does not hold yet; return ``{"done", "skipped",
+    "failed"}`` lists of tasks.
+
+    ``episodes``: one budget for all envs, ``{env: budget}``, or None for each env's budget (the suite's, else
+    ``suites.BUDGETS``). ``results_dir``: None for the suite's study folder (:func:`default_results_dir`).
+    ``zoo_logs``: a folder to also write the RL Zoo's ``evaluations.npz`` files to (None: none).
+    """
+    cells = select_cells(suite, algos, envs, seeds)
+    if isinstance(episodes, int):
+        episodes = {e: episodes for _, e, _ in cells}
+    the_suite = suites.SUITES.get(suite) if suite else None
+    results_dir = Path(results_dir) if results_dir is not None else default_results_dir(suite)
+    results_dir.mkdir(parents=True, exist_ok=True)
+    if store.repair(results_dir) and verbose:
+        print(f"cut the truncated last record of {store.runs_path(results_dir)} (an interrupted append)", flush=True)
+    finished = store.finished_cells(results_dir)
+    status: dict[str, list] = {"done": [], "skipped": [], "failed": []}
+    tasks = []
+    git = task_module.git_state()  # the code this sweep loads; a commit made while it runs does not change it
+    for algo, env, seed in cells:
+        budget = suites.budget(env, (episodes or {}).get(env), the_suite)
+        if budget.episodes < 1:
+            raise ValueError(f"--episodes for {env} must be >= 1, got {budget.episodes}")
+        hyperparams, source = suites.load_hyperparams(algo, env, hyperparams_dirs)
+        task = {
+            "algo": algo,
+            "zoo_algo": suites.ALGOS[algo].zoo_algo,
+            "hyperparams": hyperparams,
+            "hyperparams_source": source,
+            "git": git,
+            "env": env,
+            "seed": int(seed),
+            "episodes": budget.episodes,
+            "eval_every": budget.eval_every,
+            "eval_episodes": budget.eval_episodes,
+            "eval_kwargs": dict(budget.eval_kwargs),
+            "diagnostics_every": the_suite.diagnostics_every if the_suite else 0,
+        }
+        (status["skipped"] if (algo, env, int(seed), budget.episodes) in finished else tasks).append(task)
+    tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
+    if verbose:
+        print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
+    sweep_info = {
+        "git": git,
+        "machine": task_module.machine_info(),
+        "load_average": os.getloadavg(),
+        "suite": suite,
+        "cells": [[a, e, s] for a, e, s in cells],
+        "episodes": {t["env"]: t["episodes"] for t in tasks + status["skipped"]},
+        "workers": workers,
+        "ray_address": ray_address,
+        "started_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    with (results_dir / "sweeps.jsonl").open("a") as f:
+        f.write(json.dumps(sweep_info) + "\n")
+
+    def on_result(record: dict[str, Any]) -> None:
+        cell = store.cell_of(record)
+        if cell in finished:  # a Ray task retried after its first result was written: keep the first
+            return
+        store.append_record(results_dir, record)
+        t = {"algo": cell[0], "env": cell[1], "seed": cell[2], "episodes": cell[3]}
+        if record["status"] != "done":
+            status["failed"].append(t)
+            if verbose:
+                print(f"FAILED {cell[0]} {cell[1]} seed {cell[2]}:\n{record['error']}", flush=True)
+            return
+        finished.add(cell)
+        status["done"].append(t)
+        if zoo_logs is not None:
+            write_zoo_evaluations(record, Path(zoo_logs))
+        if verbose:
+            best = record["episodes"]["best_so_far"][-1] if record["n_episodes"] else float("nan")
+            print(
+                f"{time.strftime('%H:%M:%S')} done {cell[0]} {cell[1]} seed {cell[2]}: {record['n_episodes']} episodes, "
+                f"{record['timesteps']} steps, {record['gradient_steps']} gradient steps, {record['cpu_time']:.1f} CPU s, "
+                f"best {best:.4g} ({record['hyperparams_source']})",
+                flush=True,
+            )
+
+    if tasks:
+        if ray_address:
+            _run_ray(tasks, ray_address, on_result)
+        else:
+            _run_local(tasks, workers, on_result)
+    if analysis and (status["done"] or status["skipped"]):
+        report = analysis_module.analyse(results_dir)
+        if verbose:
+            print(report)
+    return status
+
+
+def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = None) -> dict[str, int] | None:
+    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}``; envs without a value keep their budget."""
+    if not values:
+        return None
+    default, per_env = None, {}
+    for value in values:
+        name, sep, number = value.rpartition("=")
+        if not number.isdigit():
+            raise ValueError(f"--episodes: expected N or ENV=N, got {value!r}")
+        if sep:
+            per_env[name] = int(number)
+        else:
+            default = int(number)
+    names = set(envs or ()) | set(per_env) | set(suites.ENVS)
+    return {env: per_env.get(env, default) for env in names if per_env.get(env, default) is not None}
+
+
+def _exit_on_sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(f"interrupted by signal {signum}; finished runs are kept, rerun the same command to resume")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--suite", default=None, help=f"one of {list(suites.SUITES)}")
+    rows = [a for a, row in suites.ALGOS.items() if row.family != "ablation"]
+    parser.add_argument("--algos", nargs="+", default=None, help=f"rows: {rows}, or abl:<config> (benchmarks/ablation.py)")
+    parser.add_argument("--envs", nargs="+", default=None, help=f"short names {suites.ENVS} or any Gymnasium id")
+    parser.add_argument("--seeds", nargs="+", type=int, default=None)
+    parser.add_argument(
+        "--episodes", nargs="+", default=None, help="override the budgets: N for all envs, ENV=N for one (e.g. 5 pendulum=3)"
+    )
+    parser.add_argument("--results", default=None, help="results folder (default: results/<the suite's study>)")
+    parser.add_argument("--hyperparams", nargs="*", default=[], help="folders searched first for <algo>.yml")
+    parser.add_argument("--workers", type=int, default=1, help="process pool size (0: in this process)")
+    parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001', 'local')")
+    parser.add_argument("--zoo-logs", default=None, help="also write the RL Zoo's evaluations.npz files under this folder")
+    parser.add_argument("--no-analysis", action="store_true", help="skip the tables and plots at the end")
+    args = parser.parse_args(argv)
+    status = sweep(
+        args.algos,
+        args.envs,
+        args.seeds,
+        parse_episodes(args.episodes, args.envs),
+        suite=args.suite,
+        results_dir=args.results,
+        hyperparams_dirs=args.hyperparams,
+        workers=args.workers,
+        ray_address=args.ray_address,
+        zoo_logs=args.zoo_logs,
+        analysis=not args.no_analysis,
+    )
+    print(f"finished: {len(status['done'])} done, {len(status['skipped'])} skipped, {len(status['failed'])} failed")
+    return 1 if status["failed"] else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

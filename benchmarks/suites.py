@@ -1,0 +1,287 @@
+"""What the benchmark runs: algorithms, per-env budgets, suites, and the hyperparameters of each run.
+
+An *algorithm* here is a benchmark row: a zoo algorithm plus a YAML file (``denfac`` and ``denfac_default`` are the
+same class with different files). A *suite* is a set of (algorithm, env, seed) cells; suites share their runs, so a
+cell that two suites contain is trained once.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sb3_denfac.envs.facts import env_facts
+
+_HERE = Path(__file__).resolve().parent
+PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
+BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
+SWEEP_PLAN = _HERE / "results" / "cost" / "sweep_plan.csv"  # estimated CPU seconds per run, written by benchmarks.cost
+
+
+@dataclass(frozen=True)
+class Algo:
+    """A benchmark row: ``zoo_algo`` with the settings of ``<name>.yml`` (the zoo's lookup), or of another row
+    (``base``) with ``overrides`` on top, or of a Python ``config(env)`` (the ablation's); ``label`` for tables."""
+
+    name: str
+    zoo_algo: str
+    label: str
+    family: str  # "paper" (the paper's Figure 3 algorithms), "peer" (what users pick today), "ablation"
+    base: str | None = None
+    overrides: tuple[tuple[str, Any], ...] = ()
+    config: Callable[[str], dict[str, Any]] | None = None
+
+
+def denfac_critic_steps_per_episode() -> int:
+    """Critic gradient steps the default DENFAC takes at every episode end: K fitted iterations x critic steps."""
+    import inspect
+
+    from sb3_denfac import DENFAC
+
+    params = inspect.signature(DENFAC.__init__).parameters
+    return int(params["n_fitted_iterations"].default) * int(params["critic_steps"].default)
+
+
+#: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC.
+MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
+#: A high update-to-data ratio, as DroQ and REDQ use (20 gradient steps per environment step).
+HIGH_UTD = (("train_freq", 1), ("gradient_steps", 20))
+
+ALGOS: dict[str, Algo] = {
+    a.name: a
+    for a in (
+        Algo("denfac", "denfac", "DENFAC (faithful)", "paper"),
+        Algo("denfac_default", "denfac", "DENFAC (default)", "paper"),
+        Algo("nfac", "nfac", "NFAC+", "paper"),
+        Algo("cacla", "cacla", "CACLA+", "paper"),
+        Algo("cmaes", "cmaes", "CMA-ES", "paper"),
+        Algo("ddpg", "ddpg", "DDPG (paper's)", "paper"),
+        Algo("td3", "td3", "SB3 TD3", "peer"),
+        Algo("sac", "sac", "SB3 SAC", "peer"),
+        Algo("crossq", "crossq", "sb3-contrib CrossQ", "peer"),
+        Algo("sac_matched", "sac", "SB3 SAC on DENFAC's schedule", "peer", base="sac", overrides=MATCHED_SCHEDULE),
+        Algo("td3_matched", "td3", "SB3 TD3 on DENFAC's schedule", "peer", base="td3", overrides=MATCHED_SCHEDULE),
+        Algo("sac_utd20", "sac", "SB3 SAC, 20 steps per env step", "peer", base="sac", overrides=HIGH_UTD),
+    )
+}
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Episodes per run, and a deterministic evaluation of ``eval_episodes`` episodes every ``eval_every`` episodes on
+    the env made with ``eval_kwargs``."""
+
+    episodes: int
+    eval_every: int = 10
+    eval_episodes: int = 1  # 1 where the start state is deterministic (the evaluation is then deterministic too)
+    eval_kwargs: tuple[tuple[str, Any], ...] = ()
+
+
+BUDGETS: dict[str, Budget] = {
+    "acrobot": Budget(100, 10, 1),
+    # From CartPole's rest start a zero action balances forever (a near-zero initial actor would score a perfect 0):
+    # the evaluation starts from gymnasium's random state instead (uniform in +-0.05), as the authors tested from
+    # random states.
+    "cartpole": Budget(100, 10, 5, (("random_start", True),)),
+    "halfcheetah": Budget(100, 10, 3),
+    "pendulum": Budget(40, 10, 5),
+    "invertedpendulum": Budget(100, 10, 5),
+    "acrobot75": Budget(100, 10, 1),
+    "hopper": Budget(100, 10, 3),
+    "reacher": Budget(100, 10, 5),
+}
+ENVS = list(BUDGETS)
+FIGURE3_ENVS = ("acrobot", "cartpole", "halfcheetah", "pendulum", "invertedpendulum", "acrobot75")
+GENERALISATION_ENVS = ("acrobot", "cartpole", "halfcheetah", "pendulum", "invertedpendulum")
+#: The matched-schedule comparison: the generalisation envs and two held-out MuJoCo tasks.
+MATCHED_ENVS = (*GENERALISATION_ENVS, "hopper", "reacher")
+# A variant env takes the YAML entries of the env it varies (the YAML files are keyed by the paper's env ids).
+HYPERPARAMS_OF = {"acrobot75": "acrobot"}
+
+
+@dataclass(frozen=True)
+class Suite:
+    """Cells ``(algo, env, seed)``: every env of ``envs`` for each ``(algos, seeds)`` group.
+
+    Suites of one ``study`` share one results folder (``results/<study>/``) and so their runs: a cell two of them
+    contain is trained once. ``budgets`` overrides the env budgets; ``diagnostics_every`` > 0 records DENFAC's
+    critic-fit diagnostics every that many episodes."""
+
+    name: str
+    envs: tuple[str, ...]
+    groups: tuple[tuple[tuple[str, ...], tuple[int, ...]], ...]
+    description: str
+    study: str = "sweep"
+    budgets: tuple[tuple[str, Budget], ...] = ()
+    diagnostics_every: int = 0
+
+    @property
+    def algos(self) -> list[str]:
+        return [a for algos, _ in self.groups for a in algos]
+
+    def seeds(self, algo: str) -> tuple[int, ...]:
+        return next(seeds for algos, seeds in self.groups if algo in algos)
+
+    def cells(self) -> list[tuple[str, str, int]]:
+        """All cells, seed by seed (a sweep stopped early has every (algo, env) at its first seeds)."""
+        cells = [(a, e, s) for algos, seeds in self.groups for a in algos for e in self.envs for s in seeds]
+        return sorted(cells, key=lambda c: (c[2], self.envs.index(c[1]), list(ALGOS).index(c[0])))
+
+
+_PAPER = ("denfac", "denfac_default", "nfac", "cacla", "cmaes")
+_THREE, _FIVE, _TEN = tuple(range(3)), tuple(range(5)), tuple(range(10))
+SUITES: dict[str, Suite] = {
+    s.name: s
+    for s in (
+        Suite(
+            "figure3",
+            FIGURE3_ENVS,
+            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq"), _FIVE)),
+            "the paper's Figure 3 comparison plus SB3 TD3/SAC and sb3-contrib CrossQ, on the paper's three envs, two "
+            "held-out Gymnasium envs, and the Acrobot with the authors' 75-decision episodes",
+        ),
+        Suite(
+            "generalisation",
+            GENERALISATION_ENVS,
+            ((("denfac_default", "denfac", "sac", "crossq"), _FIVE),),
+            "DENFAC's default and faithful configurations against SAC and CrossQ, library defaults, five envs",
+        ),
+        Suite(
+            "matched",
+            MATCHED_ENVS,
+            ((("denfac_default", "denfac", "sac", "sac_matched", "td3_matched"), _FIVE),),
+            "the default DENFAC against SB3's SAC and TD3 given DENFAC's schedule (train at every episode end, as many "
+            "critic steps as DENFAC) and SAC at one step per env step; equal episodes, gradient steps and CPU reported",
+        ),
+        Suite(
+            "high_utd",
+            ("pendulum", "reacher"),
+            ((("sac_utd20",), _FIVE),),
+            "SB3 SAC at 20 gradient steps per env step (DroQ's and REDQ's ratio, without their regularisers), on the "
+            "envs where its cost fits",
+        ),
+        Suite(
+            "denfac_cartpole",
+            ("cartpole",),
+            ((("denfac",), _FIVE),),
+            "DENFAC with the paper's CartPole settings, 5 seeds x 100 episodes (formerly benchmarks/denfac_cartpole.py)",
+        ),
+    )
+}
+
+
+def budget(env: str, episodes: int | None = None, suite: Suite | None = None) -> Budget:
+    """The env's budget in ``suite`` (else ``BUDGETS``); ``episodes`` overrides its episode count; unknown envs: 100
+    episodes, 1 evaluation episode."""
+    base = dict(suite.budgets).get(env) if suite is not None else None
+    base = base or BUDGETS.get(env, Budget(100))
+    return base if episodes is None else Budget(episodes, base.eval_every, base.eval_episodes, base.eval_kwargs)
+
+
+def _paper_denfac() -> dict[str, Any]:
+    from sb3_denfac.denfac.presets import paper
+
+    return paper()
+
+
+#: Rows whose package YAML states the paper's settings only for the paper's envs (its ``default`` entry is the
+#: library's general default): on any other env they use this preset, so "DENFAC (faithful)" stays Algorithm 1.
+PRESET_ELSEWHERE: dict[str, Any] = {"denfac": _paper_denfac}  # the one preset: presets.PAPER
+
+
+def _takes_gamma(algo: str) -> bool:
+    import inspect
+
+    from sb3_denfac.zoo import algorithm_class
+
+    zoo_algo = ALGOS[algo].zoo_algo if algo in ALGOS else algo
+    return "gamma" in inspect.signature(algorithm_class(zoo_algo).__init__).parameters
+
+
+def load_hyperparams(algo: str, env: str, dirs: Iterable[str | Path] = ()) -> tuple[dict[str, Any], str]:
+    """The hyperparameters of row ``algo`` on ``env`` and where they come from: (hyperparameters, source).
+
+    - A row with ``config`` (the ablation's) takes ``config(env)``.
+    - A row with a ``base`` row takes that row's hyperparameters with its ``overrides`` on top (``gradient_steps``
+      ``"denfac"``: :func:`denfac_critic_steps_per_episode`).
+    - Any other row: zoo-style lookup of ``<algo>.yml`` in ``dirs``, then the package's folder, then
+      ``benchmarks/configs``: the entry of the env's Gymnasium id (of its base env for a variant, ``HYPERPARAMS_OF``),
+      else ``default``. Fails if no file or entry exists: every row states its settings.
+
+    The env's prescribed gamma (``ENV_FACTS``) is added when the result sets none and the algorithm has one."""
+    row = ALGOS.get(algo)
+    if row is not None and row.config is not None:
+        hyperparams, source = {"policy": "MlpPolicy", **row.config(env)}, f"benchmarks.ablation.CONFIGS[{algo[4:]!r}]"
+    elif row is not None and row.base is not None:
+        hyperparams, source = load_hyperparams(row.base, env, dirs)
+        overrides = {k: (denfac_critic_steps_per_episode() if v == "denfac" else v) for k, v in row.overrides}
+        hyperparams = {**hyperparams, **overrides}
+        source += " + " + ", ".join(f"{k}={v}" for k, v in overrides.items())
+        return hyperparams, source
+    else:
+        hyperparams, source = _yaml_hyperparams(algo, env, dirs)
+    env_fact = env_facts(env)
+    if "gamma" not in hyperparams and env_fact.gamma is not None and _takes_gamma(algo):
+        hyperparams["gamma"] = env_fact.gamma
+        source += f" + the env's gamma {env_fact.gamma}"
+    return hyperparams, source
+
+
+def _yaml_hyperparams(algo: str, env: str, dirs: Iterable[str | Path]) -> tuple[dict[str, Any], str]:
+    from sb3_denfac.zoo import load_config_file, select_entry
+
+    dirs = list(dirs)
+    entry_id = env_facts(HYPERPARAMS_OF.get(env, env)).gym_id
+    for folder in [*map(Path, dirs), PACKAGE_HYPERPARAMS_DIR, BENCHMARK_CONFIGS_DIR]:
+        path = folder / f"{algo}.yml"
+        if path.is_file():
+            break
+    else:
+        raise FileNotFoundError(
+            f"no {algo}.yml in {[str(d) for d in dirs]}, {PACKAGE_HYPERPARAMS_DIR} or {BENCHMARK_CONFIGS_DIR}"
+        )
+    config = load_config_file(path)
+    if algo in PRESET_ELSEWHERE and entry_id not in config:
+        return {"policy": "MlpPolicy", **PRESET_ELSEWHERE[algo]()}, f"sb3_denfac.denfac.presets.PAPER (no {path.name} entry)"
+    key = entry_id if entry_id in config else "default"
+    return select_entry(config, entry_id, path), f"{path.name}[{key}]"
+
+
+@functools.cache
+def _cost_table() -> dict[tuple[str, str], float]:
+    import csv
+
+    if not SWEEP_PLAN.exists():
+        return {}
+    with SWEEP_PLAN.open(newline="") as f:
+        return {(r["algo"], r["env"]): float(r["estimate"]) for r in csv.DictReader(f)}
+
+
+def estimated_cost(algo: str, env: str) -> float:
+    """Estimated CPU seconds of one full run (``results/sweep_plan.csv``); NaN if not measured."""
+    return _cost_table().get((algo, env), float("nan"))
+
+
+def _register_ablation() -> None:
+    """The ablation's configurations as rows ``abl:<config>`` and its suite (study ``ablation``)."""
+    from benchmarks import ablation
+
+    for name in ablation.CONFIGS:
+        row = f"abl:{name}"
+        ALGOS[row] = Algo(row, "denfac", name, "ablation", config=functools.partial(ablation.hyperparams, name))
+    SUITES["ablation"] = Suite(
+        "ablation",
+        tuple(ablation.BUDGETS),
+        ((tuple(f"abl:{name}" for name in ablation.CONFIGS), _THREE),),
+        "DENFAC configurations one factor apart (benchmarks/ablation.py), with critic-fit diagnostics; select "
+        "configurations with --algos",
+        study="ablation",
+        budgets=tuple(ablation.BUDGETS.items()),
+        diagnostics_every=5,
+    )
+
+
+_register_ablation()

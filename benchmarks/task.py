@@ -1,0 +1,244 @@
+"""One benchmark run (``run_one``): train ``ALGO("MlpPolicy", env, **hyperparams)`` for a budget of episodes, record
+every episode.
+
+Per episode (``EpisodePerformanceCallback``): the paper's measure, its best so far, the return, the length, the step
+count; plus (:class:`RunClock`) the run's CPU seconds so far. Every ``eval_every`` episodes, and at the last one, the
+policy that played the episode is evaluated deterministically on a separate env for ``eval_episodes`` episodes; the
+evaluation's own CPU time is left out of the run's CPU seconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import io
+import os
+import platform
+import subprocess
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from benchmarks.diagnostics import Diagnostics
+
+_REPO = Path(__file__).resolve().parent.parent
+
+
+def evaluate(model: Any, env: Any, n_episodes: int) -> list[float]:
+    """The measure of ``n_episodes`` deterministic episodes (``info["paper_performance"]``, else the return)."""
+    scores = []
+    for _ in range(n_episodes):
+        obs, _ = env.reset()
+        done, ret, info = False, 0.0, {}
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, info = env.step(action)
+            ret += float(reward)
+            done = terminated or truncated
+        scores.append(float(info.get("paper_performance", ret)))
+    return scores
+
+
+class RunClock(BaseCallback):
+    """CPU seconds of the training process at each episode end, and the periodic deterministic evaluations.
+
+    :param eval_env: env for the evaluations (``None``: no evaluation).
+    :param eval_every: evaluate after every ``eval_every``-th episode and after episode ``max_episodes``.
+    """
+
+    def __init__(self, eval_env: Any = None, eval_every: int = 10, eval_episodes: int = 1, max_episodes: int = 0):
+        super().__init__()
+        self.eval_env, self.eval_every, self.eval_episodes, self.max_episodes = (
+            eval_env,
+            eval_every,
+            eval_episodes,
+            max_episodes,
+        )
+        self.cpu_times: list[float] = []  # cumulative training CPU seconds at each episode end
+        self.evaluations: list[dict[str, Any]] = []
+        self._start = 0.0
+        self.eval_cpu_time = 0.0
+
+    def _on_training_start(self) -> None:
+        self._start = time.process_time()
+
+    def _on_step(self) -> bool:
+        for done in self.locals["dones"]:
+            if not done:
+                continue
+            self.cpu_times.append(time.process_time() - self._start - self.eval_cpu_time)
+            episode = len(self.cpu_times)
+            if self.eval_env is not None and (episode % self.eval_every == 0 or episode == self.max_episodes):
+                before = time.process_time()
+                scores = evaluate(self.model, self.eval_env, self.eval_episodes)
+                self.eval_cpu_time += time.process_time() - before
+                self.evaluations.append({"episode": episode, "scores": scores})
+        return True
+
+
+def git_state() -> dict[str, Any]:
+    git: dict[str, Any] = {}
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        run = functools.partial(subprocess.run, cwd=_REPO, capture_output=True, text=True, timeout=10, check=True)
+        git["commit"] = run(["git", "rev-parse", "HEAD"]).stdout.strip()
+        # the code actually run: uncommitted changes to the package and the benchmark are listed
+        git["modified"] = run(
+            ["git", "status", "--porcelain", "--", "sb3_denfac", "benchmarks/*.py", "hyperparams"]
+        ).stdout.splitlines()
+    return git
+
+
+def machine_info() -> dict[str, Any]:
+    import torch
+
+    cpu = ""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    return {
+        "host": platform.node(),
+        "nproc": os.cpu_count(),
+        "cpu_model": cpu or platform.processor(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "platform": platform.platform(),
+    }
+
+
+class GradientSteps(BaseCallback):
+    """Critic gradient steps taken so far, for a like-for-like count across algorithms.
+
+    SB3's off-policy algorithms (TD3, SAC, CrossQ, this package's DDPG) count one ``_n_updates`` per critic gradient
+    step. DENFAC counts updates (episode ends); each runs ``train/fitted_iterations`` iterations of ``critic_steps``
+    critic steps, read from the logger after every update. On-policy and actor-only algorithms have no Q critic: None.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.denfac_steps = 0
+        self._seen_updates = 0
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:  # after the update that followed the last rollout
+        model = self.model
+        if hasattr(model, "n_fitted_iterations") and model._n_updates != self._seen_updates:
+            iterations = model.logger.name_to_value.get("train/fitted_iterations", model.n_fitted_iterations)
+            self.denfac_steps += int(iterations) * int(model.critic_steps)
+            self._seen_updates = model._n_updates
+
+    def total(self) -> int | None:
+        from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
+        self._on_rollout_start()
+        if hasattr(self.model, "n_fitted_iterations"):
+            return self.denfac_steps
+        return int(self.model._n_updates) if isinstance(self.model, OffPolicyAlgorithm) else None
+
+
+class DiagnosticsCallback(BaseCallback):
+    """Critic-fit diagnostics (``benchmarks.diagnostics``) on the buffer after the update that follows every
+    ``every``-th episode (DENFAC rows of the ablation)."""
+
+    def __init__(self, every: int, performance: Any) -> None:
+        super().__init__()
+        self.diagnostics, self.performance, self._last = Diagnostics(every), performance, 0
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        episode = self.performance.n_episodes
+        rb = getattr(self.model, "replay_buffer", None)
+        if episode != self._last and episode % self.diagnostics.every == 0 and rb is not None and rb.size() > 1:
+            self.diagnostics.measure(self.model, episode)
+        self._last = episode
+
+
+def columns(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
+    """Per-episode records -> per-field columns (the store's compact form)."""
+    return {field: [r.get(field) for r in records] for field in EPISODE_FIELDS}
+
+
+EPISODE_FIELDS = ("episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time", "cpu_time")
+
+
+def run_one(task: dict[str, Any]) -> dict[str, Any]:
+    """One (algo, env, seed) run of ``task["zoo_algo"]`` with ``task["hyperparams"]`` (needs only the installed package).
+
+    Returns the run's record for ``benchmarks.store``: ``status`` ``"done"`` with its metadata, per-episode columns,
+    critic-fit diagnostics (if ``task["diagnostics_every"]``) and log; or ``"failed"`` with the traceback."""
+    import torch
+
+    torch.set_num_threads(1)
+    log = io.StringIO()
+    load_start = os.getloadavg()
+    key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+    try:
+        with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            import gymnasium as gym
+            from stable_baselines3.common.callbacks import CallbackList
+
+            import sb3_denfac  # noqa: F401  (registers the paper's envs)
+            from sb3_denfac.common.callbacks import EpisodePerformanceCallback
+            from sb3_denfac.envs.facts import env_facts
+            from sb3_denfac.zoo import make_model
+
+            facts = env_facts(task["env"])
+            hyperparams, source = task["hyperparams"], task["hyperparams_source"]
+            start, cpu_start = time.perf_counter(), time.process_time()
+            model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device="cpu")
+            eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
+            if eval_env is not None:
+                eval_env.reset(seed=10_000 + task["seed"])
+            performance = EpisodePerformanceCallback(max_episodes=task["episodes"], lower_is_better=facts.lower_is_better)
+            clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"])
+            steps = GradientSteps()
+            callbacks = [performance, clock, steps]
+            if task.get("diagnostics_every"):
+                diagnostics = DiagnosticsCallback(task["diagnostics_every"], performance)
+                callbacks.append(diagnostics)
+            max_steps = gym.spec(facts.gym_id).max_episode_steps or 10_000
+            # The step budget only guards against a run that never ends an episode; the episode budget stops training.
+            model.learn(total_timesteps=task["episodes"] * max_steps + 1, callback=CallbackList(callbacks))
+            wall_time, cpu_time = time.perf_counter() - start, time.process_time() - cpu_start - clock.eval_cpu_time
+            model.get_env().close()
+            if eval_env is not None:
+                eval_env.close()
+    except Exception:
+        return {**key, "status": "failed", "error": traceback.format_exc(), "log": log.getvalue(), "task": task}
+    episodes = performance.records[: task["episodes"]]
+    for record, cpu in zip(episodes, clock.cpu_times, strict=False):
+        record["cpu_time"] = cpu
+    return {
+        **key,
+        "status": "done",
+        **{k: task[k] for k in ("eval_every", "eval_episodes")},
+        "eval_kwargs": task.get("eval_kwargs", {}),
+        "zoo_algo": task["zoo_algo"],
+        "gym_id": facts.gym_id,
+        "n_episodes": len(episodes),
+        "timesteps": int(model.num_timesteps),
+        "gradient_steps": steps.total(),
+        "wall_time": wall_time,
+        "cpu_time": cpu_time,
+        "eval_cpu_time": clock.eval_cpu_time,
+        "evaluations": clock.evaluations,
+        "hyperparams_source": source,
+        "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
+        "lower_is_better": facts.lower_is_better,
+        "git": task.get("git") or git_state(),
+        "machine": machine_info(),
+        "load_average": {"start": load_start, "end": os.getloadavg()},
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "episodes": columns(episodes),
+        **({"diagnostics": diagnostics.diagnostics.rows} if task.get("diagnostics_every") else {}),
+        "log": log.getvalue()[-20_000:],
+    }

@@ -1,0 +1,102 @@
+"""The verdict table: one row per claim of the paper's section 4, and DENFAC against TD3, SAC and CrossQ.
+
+Each claim is decided on each measure of ``benchmarks.stats.MEASURES`` by the rules of ``benchmarks.stats.verdict`` and
+``benchmarks.stats.combine`` from rliable's probability of improvement P(A > B) on one env and its 95% interval.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from benchmarks import stats as st
+from benchmarks.suites import ALGOS
+from sb3_denfac.envs.facts import env_facts
+
+PAPER_ENVS = ["acrobot", "cartpole", "halfcheetah", "acrobot75"]  # acrobot75: the authors' episode length
+PEERS = ["td3", "sac", "crossq"]
+
+
+def _label(algo: str) -> str:
+    return ALGOS[algo].label if algo in ALGOS else algo
+
+
+def _compare(runs: pd.DataFrame, a: str, b: str, env: str, measure: str, kind: str) -> tuple[str, str]:
+    p, low, high, na, nb = st.probability_of_improvement(runs, a, b, [env], measure)
+    text = (
+        f"P({_label(a)} > {_label(b)}) = {p:.2f} [{low:.2f}, {high:.2f}], n = {na} vs {nb}"
+        if na >= 2 and nb >= 2
+        else (f"n = {na} vs {nb} runs")
+    )
+    return st.verdict(kind, low, high), text
+
+
+def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]]) -> dict[str, str]:
+    row = {"claim": claim, "env": env}
+    for measure in st.MEASURES:
+        results = [_compare(runs, a, b, env, measure, kind) for a, b, kind in parts]
+        row[f"verdict ({measure})"] = st.combine([v for v, _ in results]) if len(results) > 1 else results[0][0]
+        row[f"interval ({measure})"] = "; ".join(t for _, t in results)
+    return row
+
+
+def _cacla_goal(runs: pd.DataFrame, env: str) -> dict[str, str] | None:
+    cacla = runs[(runs["algo"] == "cacla") & (runs["env"] == env)]
+    if cacla.empty:
+        return None
+    n, reached = len(cacla), int(cacla["final_best"].map(env_facts(env).reached).sum())
+    low, high = st.goal_fraction(reached, n)
+    budget = int(cacla["episodes"].min())
+    v = (
+        "refuted"
+        if reached
+        else f"held within {budget} episodes (the paper: 750)"
+        if n >= 2
+        else "inconclusive (too few runs)"
+    )
+    text = f"{reached}/{n} runs reached the goal within {budget} episodes; fraction 95% CI [{low:.2f}, {high:.2f}]"
+    row = {"claim": "CACLA+ cannot reach the Acrobot goal", "env": env}
+    for measure in st.MEASURES:
+        row[f"verdict ({measure})"] = v if measure == "final_best" else "(best-so-far only)"
+        row[f"interval ({measure})"] = text if measure == "final_best" else ""
+    return row
+
+
+def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """All claims that the runs can speak to (a claim whose algorithms have no runs on the env is left out)."""
+    have = set(zip(runs["algo"], runs["env"], strict=True))
+    rows = []
+
+    def add(claim: str, env: str, parts: list[tuple[str, str, str]]) -> None:
+        if all((a, env) in have and (b, env) in have for a, b, _ in parts):
+            rows.append(_claim(runs, claim, env, parts))
+
+    for env in PAPER_ENVS:
+        add("DENFAC more data-efficient than DDPG", env, [("denfac", "ddpg", "better")])
+        add("DENFAC about equal to NFAC+", env, [("denfac", "nfac", "equal")])
+        add(
+            "CMA-ES strong: better than the online DDPG and CACLA+",
+            env,
+            [("cmaes", "ddpg", "better"), ("cmaes", "cacla", "better")],
+        )
+        others = [(x, "cacla", "better") for x in ("denfac", "nfac", "ddpg", "cmaes")]
+        add("CACLA+ the least data-efficient", env, others)
+    for env in ("acrobot", "acrobot75"):
+        goal = _cacla_goal(runs, env)
+        if goal is not None:
+            rows.append(goal)
+    envs = list(dict.fromkeys(runs["env"]))
+    for denfac in ("denfac", "denfac_default"):
+        for peer in PEERS:
+            for env in envs:
+                add(f"{_label(denfac)} more data-efficient than {_label(peer)}", env, [(denfac, peer, "better")])
+    return pd.DataFrame(rows)
+
+
+RULES = f"""Rules. For two algorithms A and B on one env, P(A > B) is rliable's probability of improvement (the
+Mann-Whitney probability that a run of A beats a run of B, ties counting half) on the measure named in the column, with
+its 95% stratified-bootstrap interval [low, high] ({st.REPS} resamples). "A more data-efficient than B": **held** if
+low > 0.5, **refuted** if high < 0.5, otherwise **inconclusive**. "A about equal to B": **refuted** if the interval
+excludes 0.5, **held** if it lies within [{st.EQUAL_MARGIN[0]}, {st.EQUAL_MARGIN[1]}], otherwise inconclusive. A claim
+made of several comparisons is refuted if one of them is, held if all are, otherwise inconclusive. Measures:
+{"; ".join(f"`{k}` = {v}" for k, v in st.MEASURES.items())} (of the exploring policy). The CACLA+ goal claim counts
+runs whose best-so-far reached the goal, with a Clopper-Pearson interval."""

@@ -1,0 +1,80 @@
+"""Every benchmark entry point (``python -m benchmarks.<module>``) runs end to end on a tiny configuration."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from benchmarks import (
+    ablation_analysis,
+    acrobot_horizon,
+    analysis,
+    cost,
+    stats,
+    store,
+    update_cost,
+    update_cost_critics,
+    update_threads,
+)
+from benchmarks import run as runner
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def test_runner_runs_as_a_module_from_the_repository_root():
+    result = subprocess.run(
+        [sys.executable, "-m", "benchmarks.run", "--help"], cwd=REPO, capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert "--suite" in result.stdout and "matched" in result.stdout
+
+
+def test_run_and_analysis_command_lines(tmp_path, monkeypatch):
+    monkeypatch.setattr(stats, "REPS", 50)
+    args = ["--algos", "denfac_default", "cmaes", "--envs", "pendulum", "--seeds", "0", "1", "--episodes", "2"]
+    assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
+    assert len(store.read_runs(tmp_path)) == 4 and not (tmp_path / "all_runs.md").exists()
+    analysis.main(["--results", str(tmp_path)])
+    assert "DENFAC (default)" in (tmp_path / "all_runs.md").read_text()
+
+
+def test_ablation_study_records_diagnostics_and_tables(tmp_path):
+    args = ["--suite", "ablation", "--algos", "abl:default", "abl:faithful", "--envs", "pendulum", "--seeds", "0"]
+    assert runner.main([*args, "--episodes", "6", "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
+    records = {r["algo"]: r for r in store.read_runs(tmp_path)}
+    assert set(records) == {"abl:default", "abl:faithful"}
+    diagnostics = records["abl:default"]["diagnostics"]
+    assert [d["episode"] for d in diagnostics] == [5] and diagnostics[0]["n"] == 5 * 200
+    assert ablation_analysis.main([str(tmp_path)]) == 0
+    tables = (tmp_path / "tables.md").read_text()
+    assert "| faithful (6 ep) | 1 |" in tables  # a run of 6 episodes is not one of the 40-episode budget
+    assert (tmp_path / "runs.csv").read_text().count("(6 ep),pendulum,0,") == 2
+
+
+def test_cost_measures_and_plans(tmp_path):
+    cost.main(["--algos", "cmaes", "--envs", "pendulum", "--results", str(tmp_path), "--sweep", str(tmp_path / "none")])
+    plan = (tmp_path / "sweep_plan.md").read_text()
+    assert "Estimated CPU seconds per full run" in plan and (tmp_path / "sweep_plan.csv").exists()
+
+
+@pytest.mark.slow
+def test_update_cost_entry_points(tmp_path):
+    update_cost.main(["--repeats", "1", "--threads", "1", "--envs", "acrobot", "--episodes", "1", "--output",
+                      str(tmp_path / "uc")])  # fmt: skip
+    result = json.loads((tmp_path / "uc.json").read_text())
+    assert {r["buffer"] for r in result["runs"]} == {"early", "trained"} and result["meta"]["git"]
+    update_cost_critics.main(["--repeats", "1", "--episodes", "1", "--envs", "Pendulum-v1", "--output",
+                              str(tmp_path / "critics")])  # fmt: skip
+    assert json.loads((tmp_path / "critics.json").read_text())["rows"][0]["ratio"] > 0
+    update_threads.main(["--repeats", "1", "--episodes", "1", "--output", str(tmp_path / "threads.json")])
+    assert len(json.loads((tmp_path / "threads.json").read_text())) == 1
+
+
+def test_acrobot_horizon(tmp_path):
+    acrobot_horizon.main(["--restarts", "1", "--generations", "2", "--switches", "1", "--stride", "25",
+                          "--output", str(tmp_path)])  # fmt: skip
+    assert "steps to goal" in (tmp_path / "acrobot_horizon.md").read_text()

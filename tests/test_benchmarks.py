@@ -1,0 +1,364 @@
+"""The benchmark package: the episode-performance callback, suites, peer settings, verdict rules, the compact runs file,
+and a tiny sweep end to end (records, rliable aggregates, verdicts, plots, resume). Smoke tests of the other entry
+points: tests/test_benchmark_entry_points.py."""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from stable_baselines3 import TD3
+from stable_baselines3.common.env_util import make_vec_env
+
+from benchmarks import run as runner
+from benchmarks import stats as st
+from benchmarks import store, suites
+from sb3_denfac.common.callbacks import EpisodePerformanceCallback
+from sb3_denfac.envs.facts import env_facts
+
+
+class ScriptedEpisodesEnv(gym.Env):
+    """Episode k (1-based) lasts 2 + k % 3 steps, gives reward 1 per step and reports paper_performance = 100 - 7 * k % 40."""
+
+    observation_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def __init__(self, with_key: bool = True):
+        self.with_key = with_key
+        self.episode = 0
+        self.t = 0
+
+    @staticmethod
+    def expected(k: int) -> tuple[int, float]:
+        return 2 + k % 3, float(100 - (7 * k) % 40)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.episode += 1
+        self.t = 0
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        length, performance = self.expected(self.episode)
+        done = self.t >= length
+        info = {"paper_performance": performance} if (done and self.with_key) else {}
+        return np.zeros(2, np.float32), 1.0, done, False, info
+
+
+def _no_training_td3(env) -> TD3:
+    return TD3("MlpPolicy", env, learning_starts=10**6, policy_kwargs={"net_arch": [4]}, seed=0, device="cpu")
+
+
+@pytest.mark.parametrize("lower_is_better", [False, True])
+def test_callback_records_paper_performance_and_stops(lower_is_better):
+    env = make_vec_env(ScriptedEpisodesEnv, n_envs=1, seed=0)
+    callback = EpisodePerformanceCallback(max_episodes=7, lower_is_better=lower_is_better)
+    model = _no_training_td3(env).learn(10_000, callback=callback)
+
+    expected = [ScriptedEpisodesEnv.expected(k) for k in range(1, 8)]
+    assert callback.n_episodes == 7  # stopped by the episode budget, far below the step budget
+    assert model.num_timesteps == sum(length for length, _ in expected)
+    np.testing.assert_allclose(callback.performances(), [p for _, p in expected])
+    running = np.minimum.accumulate if lower_is_better else np.maximum.accumulate
+    np.testing.assert_allclose([r["best_so_far"] for r in callback.records], running([p for _, p in expected]))
+    assert [r["length"] for r in callback.records] == [length for length, _ in expected]
+    assert [r["return"] for r in callback.records] == [float(length) for length, _ in expected]  # from Monitor
+    assert [r["timesteps"] for r in callback.records] == list(np.cumsum([length for length, _ in expected]))
+    walls = [r["wall_time"] for r in callback.records]
+    assert walls == sorted(walls) and walls[0] >= 0
+    assert callback.best_so_far == callback.records[-1]["best_so_far"]
+
+
+def test_callback_without_key_and_with_two_envs():
+    env = make_vec_env(lambda: ScriptedEpisodesEnv(with_key=False), n_envs=2, seed=0)
+    callback = EpisodePerformanceCallback(max_episodes=4, fallback_to_return=True)
+    _no_training_td3(env).learn(10_000, callback=callback)
+    assert callback.n_episodes >= 4
+    assert [r["episode"] for r in callback.records] == list(range(1, callback.n_episodes + 1))
+    # Without the key the measure falls back to the episode return (= its length here).
+    assert [r["performance"] for r in callback.records] == [float(r["length"]) for r in callback.records]
+
+    nan_callback = EpisodePerformanceCallback(max_episodes=2, fallback_to_return=False)
+    _no_training_td3(make_vec_env(lambda: ScriptedEpisodesEnv(with_key=False), n_envs=1)).learn(1000, callback=nan_callback)
+    assert np.isnan(nan_callback.performances()).all()
+    with pytest.raises(ValueError, match="max_episodes"):
+        EpisodePerformanceCallback(max_episodes=0)
+
+
+def test_env_facts_and_budgets():
+    acrobot, cartpole = env_facts("acrobot"), env_facts("sb3_denfac/ContinuousCartPole-v0")
+    assert (acrobot.gamma, acrobot.lower_is_better, cartpole.gamma) == (0.9, True, 0.99)
+    assert acrobot.reached(320.0) and not acrobot.reached(500.0) and not acrobot.reached(float("nan"))
+    assert cartpole.reached(-500.0) and not cartpole.reached(-501.0)
+    assert env_facts("Pendulum-v1").gamma is None and env_facts("MountainCarContinuous-v0").measure == "episode return"
+    assert {e: suites.BUDGETS[e].episodes for e in suites.GENERALISATION_ENVS} == {
+        "acrobot": 100, "cartpole": 100, "halfcheetah": 100, "pendulum": 40, "invertedpendulum": 100
+    }  # fmt: skip
+    assert gym.spec("sb3_denfac/ContinuousAcrobot75-v0").max_episode_steps == 75
+
+
+def test_suites_and_cells():
+    figure3_cells = runner.select_cells("figure3")
+    assert len(figure3_cells) == len(set(figure3_cells)) == 5 * 6 * 10 + 4 * 6 * 5
+    for algo in ("denfac", "denfac_default", "nfac", "cacla", "cmaes"):
+        assert suites.SUITES["figure3"].seeds(algo) == tuple(range(10))
+    generalisation = runner.select_cells("generalisation")
+    assert {a for a, _, _ in generalisation} == {"denfac_default", "denfac", "sac", "crossq"}
+    assert len(generalisation) == 4 * 5 * 5 and set(generalisation) <= set(figure3_cells)  # shared runs
+    assert [c[2] for c in figure3_cells] == sorted(c[2] for c in figure3_cells)  # seed by seed
+    assert runner.select_cells("generalisation", envs=["pendulum"], seeds=[0]) == [
+        ("denfac", "pendulum", 0), ("denfac_default", "pendulum", 0), ("sac", "pendulum", 0), ("crossq", "pendulum", 0)
+    ]  # fmt: skip
+    with pytest.raises(ValueError, match="unknown --suite"):
+        runner.select_cells("nope")
+    with pytest.raises(ValueError, match="unknown --algos"):
+        runner.select_cells(None, ["nope"], ["cartpole"], [0])
+    matched = runner.select_cells("matched")
+    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 5 * 7 * 5
+    ablation = suites.SUITES["ablation"]
+    assert ablation.study == "ablation" and ablation.diagnostics_every > 0
+    assert runner.default_results_dir("ablation").name == "ablation" and runner.default_results_dir(None).name == "sweep"
+    assert "abl:faithful" in ablation.algos and not any("proto" in a for a in ablation.algos)
+    assert suites.budget("halfcheetah", None, ablation).episodes == 30 and suites.budget("halfcheetah").episodes == 100
+    assert runner.parse_episodes(["60", "halfcheetah=20"])["halfcheetah"] == 20
+    assert runner.parse_episodes(["60"])["pendulum"] == 60 and runner.parse_episodes(None) is None
+
+
+def test_hyperparams_lookup(tmp_path):
+    (tmp_path / "td3.yml").write_text("sb3_denfac/ContinuousCartPole-v0:\n  learning_starts: 7\ndefault:\n  tau: 0.5\n")
+    assert suites.load_hyperparams("td3", "cartpole", [tmp_path])[0] == {"learning_starts": 7, "gamma": 0.99}
+    params, source = suites.load_hyperparams("td3", "acrobot", [tmp_path])
+    assert params == {"tau": 0.5, "gamma": 0.9} and source == "td3.yml[default] + the env's gamma 0.9"
+    assert suites.load_hyperparams("td3", "pendulum", [tmp_path])[0] == {"tau": 0.5}  # Pendulum prescribes no gamma
+    # DENFAC (default): the library's defaults, plus only the env's prescribed gamma
+    assert suites.load_hyperparams("denfac_default", "acrobot")[0] == {"policy": "MlpPolicy", "gamma": 0.9}
+    assert suites.load_hyperparams("denfac_default", "invertedpendulum")[0] == {"policy": "MlpPolicy"}
+    # the Acrobot variant takes the Acrobot entries (the paper's Figure 5 settings)
+    assert suites.load_hyperparams("denfac", "acrobot75")[0] == suites.load_hyperparams("denfac", "acrobot")[0]
+    with pytest.raises(FileNotFoundError):
+        suites.load_hyperparams("nope", "cartpole")
+
+
+def test_ablation_configurations_take_the_papers_settings_from_one_place():
+    """The faithful ablation rows are presets.PAPER plus the env's Figure 5 values of hyperparams/denfac.yml."""
+    from benchmarks import ablation
+    from sb3_denfac.denfac.presets import PAPER
+
+    yaml = suites.load_hyperparams("denfac", "acrobot")[0]
+    faithful = suites.load_hyperparams("abl:faithful", "acrobot")[0]
+    for key in ("buffer_size", "reset_critic", "inverting_gradients", "gamma"):
+        assert faithful[key] == yaml[key], key
+    assert faithful["policy_kwargs"]["net_arch"] == yaml["policy_kwargs"]["net_arch"]
+    assert faithful["learning_rate"] == PAPER["learning_rate"] and faithful["weighting"] == "retrace"
+    on_pendulum = suites.load_hyperparams("abl:faithful", "pendulum")[0]
+    assert on_pendulum == {"policy": "MlpPolicy", **ablation.FAITHFUL} and on_pendulum["buffer_size"] == 6000
+    # a factor moved away from the paper is not put back by the env's values
+    assert suites.load_hyperparams("abl:faithful+nets", "acrobot")[0]["policy_kwargs"]["net_arch"] == {
+        "pi": [64, 64], "qf": [64, 64]
+    }  # fmt: skip
+    assert suites.load_hyperparams("abl:good+vecnorm", "pendulum")[0]["normalize"] is True
+
+
+@pytest.mark.parametrize("algo", ["td3", "sac", "crossq", "ddpg", "sac_matched", "td3_matched", "sac_utd20"])
+def test_peers_train_within_the_first_episode(algo):
+    """learning_starts is at most one (full-length) episode on every env of every suite the peer is in; DDPG keeps its
+    8 updates per step."""
+    envs = {e for suite in suites.SUITES.values() if algo in suite.algos for e in suite.envs}
+    assert envs
+    for env in envs:
+        params, _ = suites.load_hyperparams(algo, env)
+        length = gym.spec(env_facts(env).gym_id).max_episode_steps
+        assert params.get("learning_starts", 100) <= length, (algo, env)
+        if algo == "ddpg":
+            assert params["gradient_steps"] == 8
+
+
+def test_verdict_rules():
+    assert st.verdict("better", 0.55, 0.9) == "held" and st.verdict("better", 0.1, 0.45) == "refuted"
+    assert st.verdict("better", 0.4, 0.8) == "inconclusive"
+    assert st.verdict("equal", 0.3, 0.7) == "held" and st.verdict("equal", 0.2, 0.7) == "inconclusive"
+    assert st.verdict("equal", 0.51, 0.7) == "refuted" and st.verdict("better", np.nan, np.nan).startswith("inconclusive")
+    assert st.combine(["held", "held"]) == "held" and st.combine(["held", "refuted"]) == "refuted"
+    assert st.combine(["held", "inconclusive"]) == "inconclusive"
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
+    """DENFAC, CMA-ES and TD3 on CartPole for 3 episodes, 2 seeds, with rliable aggregates and verdicts; a SAC whose
+    warm-up outlasts the budget is run too and must be left out of every table."""
+    monkeypatch.setattr(st, "REPS", 200)
+    (tmp_path / "hp").mkdir()
+    (tmp_path / "hp" / "sac.yml").write_text("default:\n  learning_starts: 100000\n")
+    (tmp_path / "hp" / "td3.yml").write_text("default:\n  learning_starts: 10\n  policy_kwargs:\n    net_arch: [16]\n")
+    out = tmp_path / "out"
+    kwargs = dict(results_dir=out, hyperparams_dirs=[tmp_path / "hp"], workers=2, verbose=0, zoo_logs=tmp_path / "zoo")
+    status = runner.sweep(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **kwargs)
+    assert len(status["done"]) == 8 and not status["failed"] and not status["skipped"]
+
+    records = {(r["algo"], r["seed"]): r for r in store.read_runs(out)}
+    assert len(records) == 8 and not [p for p in out.iterdir() if p.is_dir()]  # no per-run files: one runs file
+    assert {p.name for p in out.iterdir()} >= {
+        "all_runs.md", "all_runs.png", "all_runs_compute.png", "all_runs_profile.png", "figure3.md", "figure3.png",
+        "figure3_compute.png", "figure3_profile.png", "runs.csv", "runs.jsonl.gz", "sweeps.jsonl",
+    }  # fmt: skip
+    for record in records.values():  # CartPole's paper measure is the episode return
+        eps = record["episodes"]
+        assert len(eps["episode"]) == 3 and all(c > 0 for c in eps["cpu_time"])
+        np.testing.assert_allclose(eps["performance"], eps["return"], atol=1e-3)
+    meta = records[("td3", 1)]
+    assert meta["n_episodes"] == 3 and meta["cpu_time"] > 0 and meta["hyperparams_source"].startswith("td3.yml[default]")
+    assert meta["git"]["commit"] and meta["machine"]["torch_threads"] == 1 and len(meta["load_average"]["start"]) == 3
+    # TD3 takes one gradient step per env step after its 10-step warm-up, but none after the last step (the episode
+    # budget stops training first)
+    assert meta["gradient_steps"] == meta["timesteps"] - 10 - 1
+    assert records[("cmaes", 0)]["gradient_steps"] is None  # no Q critic
+    # evaluated at the last episode (before the 10th), from CartPole's random start: a zero action cannot score 0 there
+    assert [e["episode"] for e in meta["evaluations"]] == [3] and meta["eval_kwargs"] == {"random_start": True}
+    assert len(meta["evaluations"][0]["scores"]) == suites.BUDGETS["cartpole"].eval_episodes == 5
+    runs = {(r["algo"], r["seed"]): r for r in _rows(out / "runs.csv")}
+    assert runs[("sac", "0")]["trained"] == "False" and runs[("td3", "0")]["trained"] == "True"
+
+    report = (out / "figure3.md").read_text()
+    assert "Runs left out because their model never trained" in report
+    tables = report.split("## cartpole")[1]
+    assert "SB3 TD3" in tables and "SB3 SAC" not in tables.split("## Aggregates")[0]
+    assert "IQM of the normalised best-so-far" in report and "Probability that DENFAC (faithful) beats" in report
+    assert "| DENFAC (faithful) more data-efficient than SB3 TD3 | cartpole |" in report
+    assert "SB3 SAC" not in report.split("## Verdicts")[1]
+    for png in ("figure3.png", "figure3_compute.png", "figure3_profile.png", "all_runs.png"):
+        assert (out / png).read_bytes()[:4] == b"\x89PNG", png
+    zoo = np.load(tmp_path / "zoo" / "td3" / "sb3_denfac-ContinuousCartPole-v0_0" / "evaluations.npz")
+    assert zoo["results"].shape == (3, 1) and np.all(np.diff(zoo["timesteps"]) > 0)
+
+    # Resume after a kill in the middle of an append: the truncated last record is dropped and its run redone.
+    path = store.runs_path(out)
+    last = store.read_records(out)
+    *_, final = last
+    path.write_bytes(path.read_bytes()[:-25])
+    assert len(store.read_runs(out)) == 7
+    status = runner.sweep(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **{**kwargs, "workers": 0})
+    assert [(t["algo"], t["seed"]) for t in status["done"]] == [(final["algo"], final["seed"])]
+    assert len(status["skipped"]) == 7 and len(store.read_runs(out)) == 8
+    # Another budget is another run: the 3-episode runs do not stand for 2-episode ones.
+    assert runner.select_cells(None, ["td3"], ["cartpole"], [0]) == [("td3", "cartpole", 0)]
+    status = runner.sweep(["td3"], ["cartpole"], [0], 2, **{**kwargs, "workers": 0, "analysis": False})
+    assert len(status["done"]) == 1 and len(store.read_runs(out)) == 9
+
+
+def test_store_keeps_first_record_and_skips_a_corrupt_tail(tmp_path):
+    record = {"algo": "a", "env": "e", "seed": 0, "episodes_requested": 2, "status": "done", "x": 1}
+    store.append_record(tmp_path, record)
+    store.append_record(tmp_path, {**record, "x": 2})  # the same cell again: the first one wins
+    store.append_record(tmp_path, {**record, "seed": 1, "status": "failed", "error": "boom"})
+    assert [r["x"] for r in store.read_runs(tmp_path)] == [1]
+    assert store.finished_cells(tmp_path) == {("a", "e", 0, 2)}
+    size = store.runs_path(tmp_path).stat().st_size
+    with store.runs_path(tmp_path).open("ab") as f:
+        f.write(b"not gzip at all")
+    assert len(list(store.read_records(tmp_path))) == 3
+    assert store.repair(tmp_path) == len(b"not gzip at all") and store.runs_path(tmp_path).stat().st_size == size
+    assert store.repair(tmp_path) == 0
+    store.write_records(tmp_path, list(store.read_records(tmp_path)))  # compaction: one gzip member, same records
+    assert len(list(store.read_records(tmp_path))) == 3 and gzip.decompress(store.runs_path(tmp_path).read_bytes())
+
+
+def test_matched_schedule_peers_take_denfacs_gradient_steps(tmp_path):
+    """SAC on DENFAC's schedule trains at episode ends with as many critic steps as the default DENFAC: on the same
+    budget both record the same number of gradient steps; SAC at 20 steps per env step records 20 per step."""
+    params, source = suites.load_hyperparams("sac_matched", "pendulum")
+    assert params["train_freq"] == (1, "episode") and params["gradient_steps"] == suites.denfac_critic_steps_per_episode()
+    assert source.startswith("sac.yml[Pendulum-v1]") and "gradient_steps=500" in source
+    assert suites.load_hyperparams("td3_matched", "acrobot")[0]["gamma"] == 0.9  # the base row's env gamma is kept
+    for row in ("sac_matched", "td3_matched", "sac_utd20"):  # everything else is the base row's
+        base = suites.load_hyperparams(suites.ALGOS[row].base, "cartpole")[0]
+        mine = suites.load_hyperparams(row, "cartpole")[0]
+        assert {k: v for k, v in mine.items() if k not in ("train_freq", "gradient_steps")} == {
+            k: v for k, v in base.items() if k not in ("train_freq", "gradient_steps")
+        }
+    assert suites.load_hyperparams("sac_utd20", "pendulum")[0]["gradient_steps"] == 20
+    status = runner.sweep(["denfac_default", "sac_matched"], ["pendulum"], [0], 3, results_dir=tmp_path, workers=0,
+                          analysis=False, verbose=0)  # fmt: skip
+    assert len(status["done"]) == 2
+    steps = {r["algo"]: r["gradient_steps"] for r in store.read_runs(tmp_path)}
+    # two updates (after episodes 1 and 2; the budget stops training at the end of the third)
+    assert steps == {"denfac_default": 1000, "sac_matched": 1000}
+
+
+def test_ray_missing_gives_clear_error(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(SystemExit, match="pip install"):
+        runner.sweep(["td3"], ["cartpole"], [0], 1, results_dir=tmp_path, ray_address="auto", verbose=0)
+
+
+def test_ray_sweep(tmp_path):
+    pytest.importorskip("ray")
+    status = runner.sweep(["td3"], ["cartpole"], [0], 2, results_dir=tmp_path, ray_address="local", verbose=0)
+    assert len(status["done"]) == 1 and store.finished_cells(tmp_path) == {("td3", "cartpole", 0, 2)}
+
+
+def test_cost_extrapolation_recovers_the_cost_models():
+    """Synthetic per-episode CPU times: the step model and the replay model (cost growing with |D|) are recovered."""
+    import pandas as pd
+
+    from benchmarks import cost
+
+    lengths = np.array([500, 120, 300, 500, 40, 500, 250, 500, 500, 80, 500, 500, 360, 500])
+    steps = np.cumsum(lengths)
+    memory = np.minimum(6000, np.concatenate([[0], steps[:-1]]))
+    per_episode_cpu = 1e-3 * lengths + 2e-5 * memory + 0.05  # a * steps + b * |D| + c
+    episodes = pd.DataFrame(
+        {"episode": np.arange(1, 15), "cpu_time": np.cumsum(per_episode_cpu), "timesteps": steps, "length": lengths}
+    )
+    row = cost.extrapolate(episodes, "denfac", "acrobot", 100, {"buffer_size": "6000"})
+    assert (row["per_step"], row["per_d"], row["per_episode"]) == pytest.approx((1e-3, 2e-5, 0.05), rel=1e-6)
+    full = np.minimum(6000, np.arange(100) * 500).sum()
+    assert row["estimate"] == pytest.approx(1e-3 * 100 * 500 + 2e-5 * full + 0.05 * 100, rel=1e-6)
+
+    online = episodes.assign(cpu_time=np.maximum(0, steps - 100) * 0.01)  # 10 ms per step after a 100-step warm-up
+    row = cost.extrapolate(online, "sac", "acrobot", 100, {"learning_starts": "100"})
+    assert row["model"] == "step" and row["estimate"] == pytest.approx(0.01 * 100 * 500, rel=1e-6)
+
+
+def test_missing_cells_cost_the_seeds_left_from_measured_runs():
+    import pandas as pd
+
+    from benchmarks import analysis
+
+    suite = suites.Suite("t", ("pendulum", "cartpole"), ((("sac",), (0, 1, 2)),), "test")
+    runs = pd.DataFrame(dict(algo=["sac", "sac"], env=["pendulum"] * 2, seed=[0, 1], cpu_time=[3600.0, 7200.0]))
+    row = analysis.missing_cells(suite, runs).iloc[0]
+    assert row["pendulum"] == "2/3, 1.50 h"  # one seed left at the median of the measured runs
+    planned = 3 * suites.estimated_cost("sac", "cartpole") / 3600
+    assert row["cartpole"] == f"0/3, <={planned:.2f} h"  # no run yet: the plan's upper bound
+    assert float(row["CPU hours left"]) == pytest.approx(1.5 + planned, abs=0.01)
+
+
+def test_bootstrap_intervals_are_reproducible_and_leave_numpys_generator_alone(monkeypatch):
+    """rliable 1.2 draws bootstrap indices from numpy's global generator: the same runs give the same intervals."""
+    import pandas as pd
+
+    monkeypatch.setattr(st, "REPS", 100)
+    rng = np.random.default_rng(1)
+    runs = pd.DataFrame(
+        [(a, e, s, rng.uniform(-1500, 0)) for a in ("x", "y") for e in ("pendulum",) for s in range(6)],
+        columns=["algo", "env", "seed", "final_best"],
+    )
+    np.random.seed(123)
+    before = np.random.get_state()[1].copy()
+    first, second = st.iqm_table(runs, ["pendulum"], "final_best"), st.iqm_table(runs, ["pendulum"], "final_best")
+    assert first.equals(second)
+    assert st.probability_of_improvement(runs, "x", "y", ["pendulum"], "final_best") == st.probability_of_improvement(
+        runs, "x", "y", ["pendulum"], "final_best"
+    )
+    assert (np.random.get_state()[1] == before).all()
