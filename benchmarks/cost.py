@@ -5,8 +5,8 @@ torch thread, results in ``benchmarks/results/cost/runs.jsonl.gz``, resumable), 
 
 - ``step`` model (TD3, SAC, CrossQ, DDPG, CACLA+: online updates): a constant cost per environment step once
   learning has started, measured on the episodes after the warm-up;
-- ``episode`` model (NFAC+ refits on the last episode, CMA-ES only acts and updates per generation): an episode costs
-  ``a * steps + c``;
+- ``episode`` model (NFAC+ refits on the last episode, CMA-ES only acts and updates per generation, the SB3 peers on
+  DENFAC's schedule take a fixed number of gradient steps at every episode end): an episode costs ``a * steps + c``;
 - ``replay`` model (DENFAC): an episode costs ``a * steps + b * |D| + c``, with ``|D| = min(buffer_size, steps so
   far)``: its end-of-episode update sweeps the whole replay memory, so it grows until D is full. Where the short run
   never half-filled D, ``b`` is taken from the same row's largest measured value on another env.
@@ -36,7 +36,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 COST_DIR = RESULTS / "cost"
 SWEEP_DIR = RESULTS / "sweep"
 REPLAY_ALGOS = {"denfac", "denfac_default"}
-EPISODE_ALGOS = {"nfac", "cmaes"}
+EPISODE_ALGOS = {"nfac", "cmaes", "sac_matched", "td3_matched"}  # the matched peers train at episode ends
 # Episodes measured per env: enough steps past the step algorithms' warm-up, and (DENFAC) past a full D where cheap.
 MEASURE_EPISODES = {"acrobot": 3, "cartpole": 10, "halfcheetah": 2, "pendulum": 3, "invertedpendulum": 60, "acrobot75": 10}
 MEASURE_EPISODES |= {"hopper": 20, "reacher": 20}
