@@ -1,19 +1,45 @@
 """sb3-denfac: the data-efficient Neural Fitted Actor-Critic family (DENFAC) for Stable-Baselines3.
 
 Importing the package registers the paper's environments with Gymnasium (ids under ``sb3_denfac/``):
-``sb3_denfac/ContinuousAcrobot-v0``, ``sb3_denfac/ContinuousCartPole-v0`` and ``sb3_denfac/HalfCheetahPaper-v0``.
+``sb3_denfac/ContinuousAcrobot-v0``, ``sb3_denfac/ContinuousCartPole-v0`` and ``sb3_denfac/HalfCheetahPaper-v0``
+(and their variants, ``sb3_denfac.envs.ENV_IDS``).
+
+The algorithms are imported on first use (``from sb3_denfac import DENFAC`` imports DENFAC's modules, torch and SB3;
+CMA-ES's ``cma``, which pulls in scipy.stats and matplotlib, only when CMA-ES is used), so ``import sb3_denfac`` and the
+``sb3-denfac-zoo --help`` command stay fast.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from sb3_denfac.envs import register_envs
 
 register_envs()
 
-from sb3_denfac.cacla import CACLA  # noqa: E402
-from sb3_denfac.cmaes import CMAES  # noqa: E402
-from sb3_denfac.common.callbacks import EpisodePerformanceCallback  # noqa: E402
-from sb3_denfac.ddpg import DDPG  # noqa: E402
-from sb3_denfac.denfac import DENFAC  # noqa: E402
-from sb3_denfac.nfac import NFAC  # noqa: E402
-
 __version__ = "0.4.0"
+
+#: Public name -> the module that defines it (imported on first access, :func:`__getattr__`).
+_LAZY: dict[str, str] = {
+    "CACLA": "sb3_denfac.cacla",
+    "CMAES": "sb3_denfac.cmaes",
+    "DDPG": "sb3_denfac.ddpg",
+    "DENFAC": "sb3_denfac.denfac",
+    "NFAC": "sb3_denfac.nfac",
+    "EpisodePerformanceCallback": "sb3_denfac.common.callbacks",
+}
+
 __all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "EpisodePerformanceCallback", "register_envs"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # later accesses skip this function
+        return value
+    raise AttributeError(f"module 'sb3_denfac' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

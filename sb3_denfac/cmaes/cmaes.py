@@ -5,9 +5,8 @@ from __future__ import annotations
 import copy
 import sys
 import time
-from typing import Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
-import cma
 import numpy as np
 import torch as th
 from gymnasium import spaces
@@ -24,6 +23,9 @@ from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_choice, check_number, check_positive, check_sigma
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
+
+if TYPE_CHECKING:  # cma imports scipy.stats and matplotlib: loaded when a search is created (or a model loaded)
+    import cma
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
 
@@ -166,6 +168,8 @@ class CMAES(InputChecksMixin, TorchThreadsMixin, ProgressBarMixin, BaseAlgorithm
                 **({} if self.population_size is None else {"popsize": self.population_size}),
                 **self.cma_options,
             }
+            import cma
+
             x0 = parameters_to_vector(self.policy.parameters()).detach().cpu().double().numpy()
             self.es = cma.CMAEvolutionStrategy(x0, self.sigma0, options)
             self.population_size = int(self.es.popsize)

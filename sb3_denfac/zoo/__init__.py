@@ -5,32 +5,55 @@ The names below are this package's public interface (the benchmarks and the quic
 ``load_config_file``, ``select_entry``, ``load_hyperparams`` and ``algorithm_class``).
 """
 
-from sb3_denfac.zoo.cli import (
-    DEFAULT_ALGO,
-    DEFAULT_ENV,
-    DEFAULT_NUM_THREADS,
-    CheckedExperimentManager,
-    main,
-    prepare_train_args,
-)
-from sb3_denfac.zoo.config import (
-    ALGORITHMS,
-    HYPERPARAMS_DIR,
-    PACKAGE_ENV_IDS,
-    PRESETS,
-    ZooConfigError,
-    algorithm_class,
-    check_env_id,
-    default_config_path,
-    expand_preset,
-    load_config_file,
-    load_hyperparams,
-    make_model,
-    register,
-    select_entry,
-    validate_config_file,
-    validate_entry,
-)
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from sb3_denfac.zoo.usage import main
+
+#: Public name -> the submodule that defines it, imported on first access (``sb3-denfac-zoo --help`` imports neither
+#: rl_zoo3 nor Optuna nor torch).
+_LAZY: dict[str, str] = {
+    **dict.fromkeys(
+        ["DEFAULT_ALGO", "DEFAULT_ENV", "DEFAULT_NUM_THREADS", "CheckedExperimentManager", "prepare_train_args"],
+        "sb3_denfac.zoo.cli",
+    ),
+    **dict.fromkeys(
+        [
+            "ALGORITHMS",
+            "HYPERPARAMS_DIR",
+            "PACKAGE_ENV_IDS",
+            "PRESETS",
+            "ZooConfigError",
+            "algorithm_class",
+            "check_env_id",
+            "default_config_path",
+            "expand_preset",
+            "load_config_file",
+            "load_hyperparams",
+            "make_model",
+            "register",
+            "select_entry",
+            "validate_config_file",
+            "validate_entry",
+        ],
+        "sb3_denfac.zoo.config",
+    ),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'sb3_denfac.zoo' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})
+
 
 __all__ = [
     "ALGORITHMS",

@@ -60,6 +60,7 @@ from sb3_denfac.zoo.config import (
     select_entry,
     validate_entry,
 )
+from sb3_denfac.zoo.usage import USAGE
 
 DEFAULT_ALGO = "denfac"
 DEFAULT_ENV = "sb3_denfac/ContinuousCartPole-v0"
@@ -241,18 +242,6 @@ COMMANDS: dict[str, Callable[[Sequence[str]], None]] = {
     "enjoy": enjoy,
     "record_video": record_video,
 }
-
-USAGE = """usage: sb3-denfac-zoo {train,optimize,enjoy,record_video} [zoo options]
-
-  train         rl_zoo3 train (defaults: --algo denfac --env sb3_denfac/ContinuousCartPole-v0,
-                --conf-file hyperparams/<algo>.yml, --num-threads 1); add -optimize to tune
-                with Optuna
-  optimize      same as train -optimize (default storage sqlite:///<log-folder>/optuna.db, study <algo>-<env>)
-  enjoy         rl_zoo3 enjoy (default --num-threads 1)
-  record_video  rl_zoo3 record_video
-
-Algorithms: denfac, ddpg (ours, inverting gradients), nfac, cacla, cmaes, plus the zoo's (td3, sac, crossq, sb3_ddpg, ...).
-Run `sb3-denfac-zoo train --help` for the zoo's options."""
 
 
 def main(argv: Sequence[str] | None = None) -> None:
