@@ -1,5 +1,5 @@
-"""Critic-fit diagnostics of the DENFAC ablation (``denfac_ablation.py``): how well Q fits its targets and tracks the
-Monte-Carlo returns of the stored trajectories, measured on the buffer after an update."""
+"""Critic-fit diagnostics of the DENFAC ablation (suite ``ablation``, ``benchmarks/ablation.py``): how well Q fits its
+targets and tracks the Monte-Carlo returns of the stored trajectories, measured on the buffer after an update."""
 
 from __future__ import annotations
 

@@ -92,7 +92,7 @@ class DENFAC(
         (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations, the
         default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or
         "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
-        ``benchmarks/results/update_cost.md``). Models saved with the removed "compiled" path load with "fast".
+        ``benchmarks/results/update_cost/``). Models saved with the removed "compiled" path load with "fast".
         Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; needs an int ``batch_size``

@@ -3,7 +3,7 @@
 ``DENFAC("MlpPolicy", env)`` is the library default: the constructor's defaults and :class:`~.policies.DENFACPolicy`'s
 (fitted iterations of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose
 minimum makes the targets, 64-64 networks without batch norm, no importance weights; why: docs/denfac.md, measurements:
-``benchmarks/results/denfac_ablation/``).
+``benchmarks/results/ablation/``).
 
 ``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common values:
 full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no proximal

@@ -7,7 +7,7 @@ Registered ids (all with ``Box(-1, 1)`` float32 actions and ``info["paper_perfor
 - ``sb3_denfac/HalfCheetahPaper-v0``: HalfCheetah-v5 with the paper's reward, 500 steps, gamma 0.99,
   performance = episode return.
 - ``sb3_denfac/ContinuousAcrobot75-v0``: the Acrobot with the authors' episode length, 75 decisions (their code:
-  1500 ODE steps of 0.01 s, one decision per 20); the goal is reachable within it (``benchmarks/acrobot_horizon.py``
+  1500 ODE steps of 0.01 s, one decision per 20); the goal is reachable within it (``python -m benchmarks.acrobot_horizon``
   and its results in ``benchmarks/results/``).
 
 Each registered env is a reward wrapper (reusable on other envs with the same state) around a continuous-action
