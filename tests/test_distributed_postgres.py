@@ -208,8 +208,7 @@ def test_killed_worker_leaves_its_trial_running_and_the_study_continues(postgres
     """SIGKILL a worker in the middle of a trial (after it completed one): the study loads, its completed trials are
     intact, the killed trial stays RUNNING (the zoo's storage has no heartbeat, so nothing ever fails it), a new worker
     carries on with new trial numbers, and ``study.tell(number, state=FAIL)`` clears the orphan."""
-    study = "denfac-pendulum-killed"
-    _create_study(postgres_url, study)
+    study = "denfac-pendulum-killed"  # not created beforehand: the first worker starts alone and creates it
     doomed_dir = tmp_path / "doomed"
     doomed = _start_worker(postgres_url, study, doomed_dir, "--n-trials", "1000", "--seed", "1")
     running: list[int] = []
