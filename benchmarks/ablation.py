@@ -125,6 +125,12 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default+proximal+n_critics2"] = merge(c["default+proximal"], dict(policy_kwargs=dict(n_critics=2)))  # library cdq
     # 0.4's default with about 2.5 critic steps per collected step (all K = 10 iterations after 181+ steps, fewer before)
     c["default04+utd2.5"] = merge(c["default+proximal+n_critics2"], dict(update_to_data_ratio=2.5))
+    # The diagnosis against SAC on DENFAC's schedule (suite `diagnosis`): the library default (0.4/0.5) and one of
+    # SAC's settings moved into it at a time (SAC's width and learning rate; no proximal term, as SAC has none)
+    c["default04"] = merge(c["default+proximal+n_critics2"])
+    c["default04+nets256"] = merge(c["default04"], dict(policy_kwargs=wide))
+    c["default04+lr3e-4"] = merge(c["default04"], dict(learning_rate=3e-4))
+    c["default04-proximal"] = merge(c["default04"], dict(actor_proximal=0.0))
     return c
 
 

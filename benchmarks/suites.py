@@ -65,6 +65,24 @@ ALGOS: dict[str, Algo] = {
         Algo("sac_matched", "sac", "SB3 SAC on DENFAC's schedule", "peer", base="sac", overrides=MATCHED_SCHEDULE),
         Algo("td3_matched", "td3", "SB3 TD3 on DENFAC's schedule", "peer", base="td3", overrides=MATCHED_SCHEDULE),
         Algo("sac_utd20", "sac", "SB3 SAC, 20 steps per env step", "peer", base="sac", overrides=HIGH_UTD),
+        # DENFAC's ingredients taken into SAC on DENFAC's schedule (the diagnosis; TD3 is SAC without its entropy term
+        # and stochastic actor): DENFAC's width, and targets frozen for 50 critic steps as in one fitted iteration
+        Algo(
+            "sac_matched_64",
+            "sac",
+            "SAC on DENFAC's schedule, 64-64",
+            "peer",
+            base="sac_matched",
+            overrides=(("policy_kwargs", {"net_arch": [64, 64]}),),
+        ),  # fmt: skip
+        Algo(
+            "sac_matched_frozen",
+            "sac",
+            "SAC on DENFAC's schedule, targets frozen 50 steps",
+            "peer",
+            base="sac_matched",
+            overrides=(("tau", 1.0), ("target_update_interval", 50)),
+        ),  # fmt: skip
     )
 }
 
@@ -155,6 +173,20 @@ SUITES: dict[str, Suite] = {
             ((("denfac_default", "denfac", "sac", "sac_matched", "td3_matched"), _FIVE),),
             "the default DENFAC against SB3's SAC and TD3 given DENFAC's schedule (train at every episode end, as many "
             "critic steps as DENFAC) and SAC at one step per env step; equal episodes, gradient steps and CPU reported",
+        ),
+        Suite(
+            "diagnosis",
+            ("invertedpendulum", "hopper", "reacher"),
+            (
+                (("sac_matched", "td3_matched", "sac_matched_64", "sac_matched_frozen"), _THREE),
+                (
+                    tuple(f"abl:{c}" for c in ("default04", "default04+nets256", "default04+lr3e-4", "default04-proximal")),
+                    _THREE,
+                ),
+            ),  # fmt: skip
+            "why SAC on DENFAC's schedule holds what DENFAC finds and loses: one ingredient at a time, both ways (SAC's "
+            "into DENFAC's default, DENFAC's into SAC), with DENFAC's critic-fit diagnostics",
+            diagnostics_every=10,
         ),
         Suite(
             "high_utd",

@@ -202,7 +202,8 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"])
             steps = GradientSteps()
             callbacks = [performance, clock, steps]
-            if task.get("diagnostics_every"):
+            diagnose = bool(task.get("diagnostics_every")) and hasattr(model, "n_fitted_iterations")  # DENFAC's buffer
+            if diagnose:
                 diagnostics = DiagnosticsCallback(task["diagnostics_every"], performance)
                 callbacks.append(diagnostics)
             max_steps = gym.spec(facts.gym_id).max_episode_steps or 10_000
@@ -239,6 +240,6 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "load_average": {"start": load_start, "end": os.getloadavg()},
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "episodes": columns(episodes),
-        **({"diagnostics": diagnostics.diagnostics.rows} if task.get("diagnostics_every") else {}),
+        **({"diagnostics": diagnostics.diagnostics.rows} if diagnose else {}),
         "log": log.getvalue()[-20_000:],
     }
