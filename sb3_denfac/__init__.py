@@ -2,7 +2,7 @@
 
 Importing the package registers the paper's environments with Gymnasium (ids under ``sb3_denfac/``):
 ``sb3_denfac/ContinuousAcrobot-v0``, ``sb3_denfac/ContinuousCartPole-v0`` and ``sb3_denfac/HalfCheetahPaper-v0``
-(and their variants, ``sb3_denfac.envs.ENV_IDS``).
+(and their variants: ``sb3_denfac.envs.ALL_ENV_IDS``).
 
 The algorithms are imported on first use (``from sb3_denfac import DENFAC`` imports DENFAC's modules, torch and SB3;
 CMA-ES's ``cma``, which pulls in scipy.stats and matplotlib, only when CMA-ES is used), so ``import sb3_denfac`` and the

@@ -184,6 +184,20 @@ def check_model_zip(path: Any) -> Any:
         return None
 
 
+def check_model_file_exists(algorithm: str, path: Any) -> None:
+    """Raise a ``FileNotFoundError`` naming the file(s) tried if ``path`` (a str or Path) is neither a file nor, with
+    ``.zip`` added, one (SB3's own error names ``<path>.zip`` only, e.g. ``model.zip.zip``)."""
+    if not isinstance(path, (str, pathlib.Path)):
+        return
+    given = pathlib.Path(path)
+    if given.exists() or pathlib.Path(f"{given}.zip").exists():
+        return
+    tried = [str(given)] if given.suffix == ".zip" else [str(given), f"{given}.zip"]
+    raise FileNotFoundError(
+        f"{algorithm}.load: no model file {' or '.join(repr(t) for t in tried)} (looked in {given.resolve().parent})"
+    )
+
+
 class ModelFileCheckMixin:
     """``load`` refuses, with a ``ValueError`` naming the problem, a file that is not a complete SB3 model zip
     (:func:`check_model_zip`) or whose policy class is none of this algorithm's ``policy_aliases`` (a zip saved by
@@ -193,6 +207,7 @@ class ModelFileCheckMixin:
 
     @classmethod
     def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
+        check_model_file_exists(cls.__name__, path)
         policy_class = check_model_zip(path)
         policy_class = (kwargs.get("custom_objects") or {}).get("policy_class", policy_class)
         allowed = tuple(cls.policy_aliases.values())

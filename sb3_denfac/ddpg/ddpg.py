@@ -160,8 +160,8 @@ class DDPG(
         check_gamma(gamma)
         batch_norm = self.policy_kwargs.get("batch_norm", True)
         check_number("batch_size", batch_size, minimum=2 if batch_norm else 1, integer=True, note=" (batch norm needs 2)")
-        if gradient_steps != -1:
-            check_number("gradient_steps", gradient_steps, minimum=1, integer=True, note=" (or -1: one per env step)")
+        if gradient_steps != -1:  # 0: collect without training, as SB3's DDPG/TD3
+            check_number("gradient_steps", gradient_steps, minimum=0, integer=True, note=" (or -1: one per env step)")
         if issubclass(self.policy_class, DDPGPolicy):
             tanh_output = self.policy_kwargs.setdefault("tanh_output", not self.inverting_gradients)
             if self.inverting_gradients and tanh_output:

@@ -76,6 +76,9 @@ ENV_VARIANTS = {
     "sb3_denfac/ContinuousAcrobot75-v0": (_ENTRY_POINTS[0], {"episode_length": 75}, 75),
 }
 
+#: Every id that :func:`register_envs` registers: the paper's envs and their variants (the list error messages show).
+ALL_ENV_IDS = (*ENV_IDS, *ENV_VARIANTS)
+
 
 def register_envs() -> None:
     """Register the paper's environments and their variants with Gymnasium (idempotent)."""
@@ -99,6 +102,7 @@ def register_envs() -> None:
 
 
 __all__ = [
+    "ALL_ENV_IDS",
     "ENV_FACTS",
     "ENV_IDS",
     "ENV_VARIANTS",

@@ -51,6 +51,7 @@ from sb3_denfac.zoo import samplers as zoo_samplers
 from sb3_denfac.zoo.config import (
     ALGORITHMS,
     ZooConfigError,
+    check_action_space_fits,
     check_env_id,
     check_env_keys,
     default_config_path,
@@ -111,8 +112,28 @@ class CheckedExperimentManager(ExperimentManager):
         if is_yaml:
             name = self.env_name.gym_id if self.env_name.gym_id in config else "default"
             source = f"{self.config}, entry {name!r}"
-            validate_entry(self.algo, hyperparams, source=source, env_id=self.env_name.gym_id)
+            try:
+                validate_entry(self.algo, hyperparams, source=source, env_id=self.env_name.gym_id)
+            except ZooConfigError:
+                self._blame_command_line(config, name, source)
+                raise
         return hyperparams, saved_hyperparams
+
+    def _blame_command_line(self, config: dict[str, Any], name: str, source: str) -> None:
+        """Called when the entry after ``-params`` fails its check: if the YAML entry alone passes, the ``-params``
+        values are the cause, and the entry is checked again under that name (raising the error that says so)."""
+        if not self.custom_hyperparams:
+            return
+        yaml_entry = expand_preset(config[name], f" ({source})", self.algo)
+        try:
+            validate_entry(self.algo, yaml_entry, source=source, env_id=self.env_name.gym_id)
+        except ZooConfigError:
+            return  # the file's entry fails by itself: its error stands
+        given = " ".join(f"{key}:{value!r}" for key, value in self.custom_hyperparams.items())
+        hyperparams = expand_preset({**config[name], **self.custom_hyperparams}, f" ({source})", self.algo)
+        validate_entry(
+            self.algo, hyperparams, source=f"command line -params {given}, over {source}", env_id=self.env_name.gym_id
+        )
 
     def _tuned_policy_kwargs(self) -> dict[str, Any]:
         """The entry's ``policy_kwargs`` for this package's samplers: a plain mapping (recorded in the study)."""
@@ -185,6 +206,7 @@ def prepare_train_args(argv: Sequence[str]) -> list[str]:
     if first.env is None:
         argv += ["--env", DEFAULT_ENV]
     check_env_id(first.env or DEFAULT_ENV)
+    check_action_space_fits(first.algo or DEFAULT_ALGO, first.env or DEFAULT_ENV)
     return argv
 
 
@@ -214,9 +236,47 @@ def train(argv: Sequence[str]) -> None:
         rl_zoo3.train.ExperimentManager = ExperimentManager
 
 
+def check_enjoy_folder(argv: Sequence[str]) -> None:
+    """Fail, naming the folder looked in, if ``enjoy``'s ``-f`` folder has no run of ``--algo`` on ``--env`` (the zoo
+    itself raises a bare AssertionError). The zoo's default folder ``rl-trained-agents`` is left to the zoo (it
+    downloads pretrained agents from the Hugging Face hub)."""
+    if any(a in ("-h", "--help") for a in argv):
+        return
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("-f", "--folder", default="rl-trained-agents")
+    parser.add_argument("--algo", default="ppo")
+    parser.add_argument("--env", default="CartPole-v1")
+    parser.add_argument("--exp-id", type=int, default=0)
+    args = parser.parse_known_args(argv)[0]
+    if "rl-trained-agents" in args.folder:
+        return
+    env_name = args.env.replace("/", "-").split(":")[-1]  # the zoo's folder name of an env id (EnvironmentName)
+    folder, algo_folder = Path(args.folder), Path(args.folder) / args.algo
+    hint = "pass -f with the log folder given to `sb3-denfac-zoo train -f` (the zoo's default: logs)"
+    if not folder.is_dir():
+        raise ZooConfigError(f"enjoy: the log folder {str(folder)!r} does not exist (working directory {Path.cwd()}): {hint}")
+    if not algo_folder.is_dir():
+        found = sorted(p.name for p in folder.iterdir() if p.is_dir())
+        raise ZooConfigError(
+            f"enjoy: no {args.algo!r} runs in {str(folder)!r}: the folder {str(algo_folder)!r} does not exist "
+            f"(algorithms found there: {', '.join(found) or 'none'}); {hint}"
+        )
+    if args.exp_id >= 0:
+        runs = sorted(p.name for p in algo_folder.glob(f"{env_name}_*") if p.name.rsplit("_", 1)[-1].isdigit())
+        wanted = algo_folder / f"{env_name}_{args.exp_id}" if args.exp_id > 0 else None
+        if not runs or (wanted is not None and not wanted.is_dir()):
+            what = f"the run folder {str(wanted)!r}" if wanted is not None else f"a run folder {env_name}_<n>"
+            others = sorted(p.name for p in algo_folder.iterdir() if p.is_dir())
+            raise ZooConfigError(
+                f"enjoy: {what} of {args.algo} on {args.env} was not found in {str(algo_folder)!r} (found: "
+                f"{', '.join(others) or 'nothing'}); check --env and --exp-id (0: the latest run)"
+            )
+
+
 def enjoy(argv: Sequence[str]) -> None:
     from rl_zoo3.enjoy import enjoy as zoo_enjoy
 
+    check_enjoy_folder(argv)
     _run_with_argv("sb3-denfac-zoo enjoy", with_default_threads(argv), zoo_enjoy)
 
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import yaml
 
-from sb3_denfac.envs import ENV_IDS
+from sb3_denfac.envs import ALL_ENV_IDS, ENV_IDS
 
 #: This package's algorithms, imported lazily by :func:`algorithm_class` ("zoo name" -> "module:Class").
 ALGORITHMS: dict[str, str] = {
@@ -136,8 +136,37 @@ def check_env_id(env_id: str, where: str = "") -> None:
     close = difflib.get_close_matches(env_id, known, n=3, cutoff=0.6)
     hint = f" Did you mean {', '.join(close)}?" if close else ""
     raise ZooConfigError(
-        f"Unknown env id {env_id!r}{where}.{hint} This package registers: {', '.join(PACKAGE_ENV_IDS)} "
+        f"Unknown env id {env_id!r}{where}.{hint} This package registers: {', '.join(ALL_ENV_IDS)} "
         f"(plus every Gymnasium id, e.g. Pendulum-v1; {len(known)} ids are registered)."
+    )
+
+
+def check_action_space_fits(algo: str, env_id: str) -> None:
+    """Fail, naming the action space, if ``env_id`` has no continuous action space and ``algo`` is one of this
+    package's algorithms (all five need a ``gymnasium.spaces.Box`` with finite bounds). Checked before any YAML entry
+    is read, so a Discrete env is not reported as a problem of the entry. Envs that cannot be made with their default
+    arguments are left to the zoo."""
+    if algo not in ALGORITHMS:
+        return
+    import gymnasium as gym
+    from gymnasium import spaces
+
+    try:
+        env = gym.make(env_id)
+    except Exception:  # noqa: BLE001 - e.g. an env that needs env_kwargs: the zoo reports its own errors
+        return
+    try:
+        space = env.action_space
+    finally:
+        env.close()
+    import numpy as np
+
+    if isinstance(space, spaces.Box) and np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)):
+        return
+    raise ZooConfigError(
+        f"{env_id} has the action space {space}, but {algo} needs a continuous action space (gymnasium.spaces.Box with "
+        f"finite bounds), as all five algorithms of sb3_denfac ({', '.join(ALGORITHMS)}) do. Pick a continuous-action "
+        f"env, e.g. Pendulum-v1 or one of this package's: {', '.join(ALL_ENV_IDS)}"
     )
 
 
@@ -349,6 +378,8 @@ def validate_config_file(path: str | os.PathLike, algo: str, check_env_ids: bool
 def load_hyperparams(algo: str, env_id: str, conf_file: str | os.PathLike | None = None) -> dict[str, Any]:
     """The validated YAML entry the zoo would use for (``algo``, ``env_id``), from this package's file by default."""
     path = Path(conf_file) if conf_file is not None else default_config_path(algo)
-    entry = select_entry(load_config_file(path), env_id, path, algo)
-    validate_entry(algo, entry, source=f"{path}, entry {env_id!r}", env_id=env_id)
+    check_action_space_fits(algo, env_id)
+    config = load_config_file(path)
+    entry = select_entry(config, env_id, path, algo)
+    validate_entry(algo, entry, source=f"{path}, entry {env_id if env_id in config else 'default'!r}", env_id=env_id)
     return entry

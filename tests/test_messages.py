@@ -1,0 +1,105 @@
+"""Errors name their real cause: the command line, the action space, the file or folder tried (issue 25)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch as th
+
+from sb3_denfac import zoo
+from sb3_denfac.quickstart import main as quickstart
+
+ALGORITHMS = ["denfac", "ddpg", "nfac", "cacla", "cmaes"]
+
+
+def _zoo_error(*argv: str) -> str:
+    with pytest.raises(SystemExit) as excinfo:
+        zoo.main(list(argv))
+    return str(excinfo.value.code)
+
+
+def test_bad_params_value_names_the_command_line(tmp_path: Path) -> None:
+    message = _zoo_error(
+        "train", "--algo", "denfac", "--env", "Pendulum-v1", "-f", str(tmp_path / "logs"), "-params", "gamma:2"
+    )
+    assert "-params gamma:2" in message and "gamma (discount factor)" in message
+    assert not (tmp_path / "logs").exists()
+
+
+def test_bad_yaml_value_still_names_the_file(tmp_path: Path) -> None:
+    conf = tmp_path / "bad.yml"
+    conf.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: 'MlpPolicy'\n  gamma: 3\n")
+    message = _zoo_error(
+        "train", "--algo", "denfac", "--env", "Pendulum-v1", "-f", str(tmp_path / "logs"), "--conf-file", str(conf),
+        "-params", "sigma:0.2",
+    )  # fmt: skip
+    assert f"{conf}, entry 'Pendulum-v1'" in message and "-params" not in message
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_discrete_env_names_the_action_space_in_the_zoo(algo: str, tmp_path: Path) -> None:
+    message = _zoo_error("train", "--algo", algo, "--env", "CartPole-v1", "-f", str(tmp_path / "logs"))
+    assert "CartPole-v1 has the action space Discrete(2)" in message and "Box" in message
+    assert "entry" not in message and not (tmp_path / "logs").exists()
+
+
+def test_discrete_env_names_the_action_space_in_the_quickstart(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        quickstart(["--env", "CartPole-v1", "--log-dir", str(tmp_path / "runs")])
+    err = capsys.readouterr().err
+    assert "action space Discrete(2)" in err and "entry" not in err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_unknown_env_lists_every_package_id(capsys, tmp_path: Path) -> None:
+    with pytest.raises(SystemExit):
+        quickstart(["--env", "sb3_denfac/NoSuch-v0", "--log-dir", str(tmp_path)])
+    assert "sb3_denfac/ContinuousAcrobot75-v0" in capsys.readouterr().err
+
+
+@pytest.mark.algorithms("all")
+def test_load_of_a_missing_file_names_the_path(name: str, algo_class, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(FileNotFoundError) as excinfo:
+        algo_class(name).load("does_not_exist.zip")
+    message = str(excinfo.value)
+    assert "'does_not_exist.zip'" in message and ".zip.zip" not in message and str(tmp_path) in message
+    with pytest.raises(FileNotFoundError, match=r"'model' or 'model\.zip'"):
+        algo_class(name).load("model")
+
+
+def test_enjoy_with_a_missing_folder_names_it(tmp_path: Path) -> None:
+    missing = tmp_path / "no_logs"
+    message = _zoo_error("enjoy", "--algo", "denfac", "--env", "Pendulum-v1", "-f", str(missing))
+    assert f"'{missing}' does not exist" in message
+    (tmp_path / "logs" / "denfac" / "Pendulum-v1_1").mkdir(parents=True)
+    message = _zoo_error("enjoy", "--algo", "ddpg", "--env", "Pendulum-v1", "-f", str(tmp_path / "logs"))
+    assert f"'{tmp_path / 'logs' / 'ddpg'}' does not exist" in message and "denfac" in message
+    message = _zoo_error("enjoy", "--algo", "denfac", "--env", "Pendulum-v1", "-f", str(tmp_path / "logs"), "--exp-id", "2")
+    assert "Pendulum-v1_2" in message and "Pendulum-v1_1" in message
+
+
+def test_quickstart_help_is_for_a_user(capsys) -> None:
+    with pytest.raises(SystemExit):
+        quickstart(["--help"])
+    out = capsys.readouterr().out
+    assert "README" not in out and "main job" not in out
+    assert "(default: 50)" in out and "sb3_denfac/ContinuousAcrobot75-v0" in out
+    for help_text in ("the algorithm", "continuous (Box) action space", "random seed", "run's folder", "progress bar"):
+        assert help_text in out  # --algo, --env, --seed, --log-dir, --progress-bar
+
+
+def test_ddpg_gradient_steps_zero_collects_without_training(make_env) -> None:
+    from sb3_denfac import DDPG
+
+    model = DDPG("MlpPolicy", make_env(), gradient_steps=0, learning_starts=10, batch_size=8, seed=0)
+    before = [p.detach().clone() for p in model.policy.parameters()]
+    model.learn(60)
+    assert model.num_timesteps == 60 and model.replay_buffer.size() == 60
+    assert model._n_updates == 0
+    assert all(th.equal(a, b) for a, b in zip(before, model.policy.parameters(), strict=True))
+    with pytest.raises(ValueError, match="gradient_steps"):
+        DDPG("MlpPolicy", make_env(), gradient_steps=-2)
+    assert np.isfinite(model.predict(make_env().reset(seed=0)[0], deterministic=True)[0]).all()
