@@ -86,8 +86,9 @@ def plot_learning_curve(
         ax.annotate(
             f"first: episode {first + 1}, {performance[first]:.0f}",
             (episodes[first], performance[first]),
-            xytext=(8, -14 if lower_is_better else 10),
+            xytext=(-10 if first + 1 > len(performance) / 2 else 10, -14 if lower_is_better else 10),
             textcoords="offset points",
+            ha="right" if first + 1 > len(performance) / 2 else "left",
             color="tab:green",
             fontweight="bold",
         )
