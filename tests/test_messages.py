@@ -103,3 +103,54 @@ def test_ddpg_gradient_steps_zero_collects_without_training(make_env) -> None:
     with pytest.raises(ValueError, match="gradient_steps"):
         DDPG("MlpPolicy", make_env(), gradient_steps=-2)
     assert np.isfinite(model.predict(make_env().reset(seed=0)[0], deterministic=True)[0]).all()
+
+
+# ----- devices (no GPU needed: the device is faked where a check reads it) -----------------------------------------
+
+
+def test_auto_takes_the_autograd_updater_off_the_cpu_and_fast_is_refused(make_model, monkeypatch) -> None:
+    from sb3_denfac.denfac import updaters
+    from sb3_denfac.denfac.fast import FastUpdater
+
+    model = make_model("denfac")
+    settings = updaters.FitSettings.of(model)
+    assert isinstance(updaters.make_updater(model.policy, settings, "auto").updater, FastUpdater)
+    cuda = th.device("cuda")
+    parameters = model.policy.parameters
+
+    class _OnCuda:  # a parameter that reports the CUDA device
+        device = cuda
+
+    monkeypatch.setattr(model.policy, "parameters", lambda: iter([_OnCuda(), *parameters()]))
+    choice = updaters.make_updater(model.policy, settings, "auto")
+    assert isinstance(choice.updater, updaters.AutogradUpdater) and "'cuda'" in choice.fast_refused
+    with pytest.raises(ValueError, match="verified on the CPU only.*'cuda'"):
+        updaters.make_updater(model.policy, settings, "fast")
+
+
+@pytest.mark.algorithms("all")
+def test_small_networks_on_cuda_through_auto_warn_once(name: str, make_model, monkeypatch) -> None:
+    import warnings
+
+    from sb3_denfac.common import device as device_module
+
+    monkeypatch.setattr(device_module, "_warned", set())
+    monkeypatch.setattr(device_module, "_is_cuda", lambda device: True)  # as if device="auto" had found CUDA
+    with pytest.warns(UserWarning, match=r"running on the GPU because device='auto'.*device='cpu'"):
+        make_model(name, device="auto")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make_model(name, device="auto")  # once per algorithm
+        device_module._warned.clear()
+        make_model(name, device="cpu")  # an explicit device: the caller's choice
+
+
+def test_small_network_warning_rules() -> None:
+    from sb3_denfac.common.device import warn_small_networks_on_gpu
+
+    small, big = th.nn.Linear(4, 4), th.nn.Linear(1000, 1000)
+    assert not warn_small_networks_on_gpu("X1", "auto", th.device("cpu"), small)
+    assert not warn_small_networks_on_gpu("X1", "cuda", th.device("cuda"), small)
+    assert not warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), big)
+    with pytest.warns(UserWarning, match="X1 is running on the GPU"):
+        assert warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), small)

@@ -30,6 +30,7 @@ from sb3_denfac.common.compat import (
     record_policy_defaults,
     upgrade_denfac,
 )
+from sb3_denfac.common.device import warn_small_networks_on_gpu
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
@@ -229,6 +230,7 @@ class DENFAC(
         record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
             self._setup_model()
+            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings
@@ -331,7 +333,7 @@ class DENFAC(
         self: SelfDENFAC,
         total_timesteps: int,
         callback: MaybeCallback = None,
-        log_interval: int = 1,  # one update per episode: log every update (SB3's default is 4 episodes)
+        log_interval: int = 4,  # episodes, as SB3's off-policy algorithms (TD3, SAC, DDPG): the zoo's default output
         tb_log_name: str = "DENFAC",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,

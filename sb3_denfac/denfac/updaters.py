@@ -249,6 +249,23 @@ def _options_refusal(settings: FitSettings) -> str | None:
     return None
 
 
+#: Devices the fast updater is verified on: its tests run on the CPU and, for "nothing assumes the CPU", on the meta
+#: device. Elsewhere (CUDA, MPS...) "auto" takes the autograd updater (standard torch ops) and "fast" is refused.
+FAST_DEVICES = ("cpu", "meta")
+
+
+def _device_refusal(policy: nn.Module) -> str | None:
+    """Why the fast updater is not used on the policy's device, or None on a device it is verified on."""
+    parameter = next(policy.parameters(), None)
+    device = parameter.device.type if parameter is not None else "cpu"
+    if device in FAST_DEVICES:
+        return None
+    return (
+        f"update_path='fast' is verified on the CPU only (its fused Adam kernel and hand-written steps are tested there),"
+        f" the policy is on {device!r}: use update_path='auto' (the autograd updater there) or 'plain'"
+    )
+
+
 def check_update_path(update_path: str, settings: FitSettings) -> None:
     """At construction, before any network exists: a ValueError if ``update_path="fast"`` asks for an option the fast
     updater does not implement (the networks are checked by :func:`make_updater`, at the update)."""
@@ -270,7 +287,7 @@ def make_updater(policy: nn.Module, settings: FitSettings, update_path: str) -> 
 
     if update_path == "plain":
         return UpdaterChoice(AutogradUpdater(policy, settings), None)
-    refusal = _options_refusal(settings)
+    refusal = _options_refusal(settings) or _device_refusal(policy)
     layers = supported_networks(policy) if refusal is None else None
     if refusal is None and layers is None:
         refusal = "update_path='fast' needs vector observations, the default MLP networks and Adam"
