@@ -1,0 +1,107 @@
+"""Nothing lost on a kill: a DENFAC run with SB3's CheckpointCallback is SIGKILLed mid-way; a new process continues
+from the last checkpoint (model, replay buffer with the behaviour means, step counters) and keeps learning."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3.common.monitor import Monitor
+
+from sb3_denfac import DENFAC
+
+EPISODE = 50
+SAVE_FREQ = 100  # steps: a checkpoint every second episode
+
+CHILD = textwrap.dedent(
+    f"""
+    import os, sys
+    import gymnasium as gym
+    import numpy as np
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+    from sb3_denfac import DENFAC
+
+    folder = sys.argv[1]
+
+    class RecordSaved(BaseCallback):
+        # After CheckpointCallback (same frequency): what the checkpoint holds, written independently (atomically).
+        def _on_step(self):
+            if self.n_calls % {SAVE_FREQ} == 0:
+                buffer = self.model.replay_buffer
+                path = os.path.join(folder, f"state_{{self.num_timesteps}}.npz")
+                np.savez(path + ".tmp.npz", pos=buffer.pos, full=buffer.full, observations=buffer.observations,
+                         actions=buffer.actions, rewards=buffer.rewards, behaviour_means=buffer.behaviour_means,
+                         n_updates=self.model._n_updates, episode_num=self.model._episode_num)
+                os.replace(path + ".tmp.npz", path)
+            return True
+
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps={EPISODE}), seed=0, n_fitted_iterations=2,
+                   critic_steps=3, actor_steps=3, batch_size=32, policy_kwargs=dict(net_arch=dict(pi=[8], qf=[8])))
+    checkpoints = CheckpointCallback({SAVE_FREQ}, folder, save_replay_buffer=True)
+    model.learn(10_000_000, callback=CallbackList([checkpoints, RecordSaved()]))
+    """
+)
+
+
+def _step_of(path: Path) -> int:
+    return int(re.search(r"_(\d+)_steps", path.name).group(1))
+
+
+@pytest.mark.timeout(120)
+def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path: Path) -> None:
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    child = subprocess.Popen([sys.executable, str(script), str(tmp_path)], env=env, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 90
+        while len(list(tmp_path.glob("state_*.npz"))) < 3:  # three checkpoints written: kill during the run
+            assert child.poll() is None, child.stderr.read().decode()
+            assert time.monotonic() < deadline, "the child wrote no checkpoints in time"
+            time.sleep(0.2)
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+        child.stderr.close()
+    assert child.returncode == -signal.SIGKILL
+
+    # The newest checkpoint whose model, buffer and record are complete (one being written at the kill is skipped).
+    steps = sorted({_step_of(p) for p in tmp_path.glob("rl_model_*_steps.zip")}, reverse=True)
+    complete = [
+        s
+        for s in steps
+        if (tmp_path / f"rl_model_replay_buffer_{s}_steps.pkl").is_file() and (tmp_path / f"state_{s}.npz").is_file()
+    ]
+    assert len(complete) >= 2
+    step = complete[0]
+    saved = np.load(tmp_path / f"state_{step}.npz")
+
+    model = DENFAC.load(
+        tmp_path / f"rl_model_{step}_steps.zip", env=Monitor(gym.make("Pendulum-v1", max_episode_steps=EPISODE))
+    )
+    model.load_replay_buffer(tmp_path / f"rl_model_replay_buffer_{step}_steps.pkl")
+    buffer = model.replay_buffer
+    assert model.num_timesteps == step and model._n_updates == int(saved["n_updates"]) > 0
+    assert model._episode_num == int(saved["episode_num"])
+    assert buffer.pos == int(saved["pos"]) and buffer.full == bool(saved["full"])
+    for name in ("observations", "actions", "rewards", "behaviour_means"):
+        np.testing.assert_array_equal(getattr(buffer, name), saved[name], err_msg=name)
+    assert np.isfinite(buffer.behaviour_means[: buffer.pos]).all() and np.abs(buffer.behaviour_means[: buffer.pos]).sum() > 0
+
+    more = 2 * EPISODE
+    model.learn(more, reset_num_timesteps=False)
+    assert model.num_timesteps == step + more
+    assert buffer.pos == int(saved["pos"]) + more  # the new transitions follow the saved ones
+    np.testing.assert_array_equal(buffer.observations[: int(saved["pos"])], saved["observations"][: int(saved["pos"])])
+    assert model._n_updates == int(saved["n_updates"]) + 2  # one update per new episode
+    assert model._episode_num == int(saved["episode_num"]) + 2
+    assert len(model.get_env().get_attr("episode_returns")[0]) == 2  # the continued run's episodes are recorded
