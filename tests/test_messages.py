@@ -154,3 +154,12 @@ def test_small_network_warning_rules() -> None:
     assert not warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), big)
     with pytest.warns(UserWarning, match="X1 is running on the GPU"):
         assert warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), small)
+
+
+def test_denfac_with_several_envs_says_why_and_where_to_read(make_env) -> None:
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from sb3_denfac import DENFAC
+
+    with pytest.raises(ValueError, match=r"n_envs=2.*after every finished episode.*docs/conventions\.md"):
+        DENFAC("MlpPolicy", make_vec_env(make_env, n_envs=2))

@@ -207,7 +207,10 @@ class DENFAC(
         )
         if self.env is not None and self.n_envs != 1:
             raise ValueError(
-                f"DENFAC updates at the end of every episode and needs a single environment, got n_envs={self.n_envs}"
+                f"DENFAC needs a single environment, got n_envs={self.n_envs}: it runs one update (K fitted iterations "
+                "over the whole replay buffer) after every finished episode, and its cost is in that update, not in the "
+                "env steps. With several envs ending their episodes together, one update per n episodes learned much "
+                "less per episode (measured on Pendulum-v1); see docs/conventions.md, 'Several environments'"
             )
         self.sigma = check_sigma(sigma)
         self.torch_threads = check_torch_threads(torch_threads)
