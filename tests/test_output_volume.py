@@ -27,9 +27,9 @@ def test_episodic_algorithms_log_every_four_episodes_as_td3(name: str, make_mode
     assert _dumps(make_model(name, seed=0), tmp_path / name, steps) == reference
 
 
-def test_cacla_logs_every_four_rollouts(make_model, episode_steps, tmp_path) -> None:
-    model = make_model("cacla", seed=0)  # n_steps = one episode
-    assert _dumps(model, tmp_path, EPISODES * episode_steps) == EPISODES // 4
+def test_cacla_logs_every_rollout_as_sb3_on_policy(make_model, episode_steps, tmp_path) -> None:
+    model = make_model("cacla", seed=0, n_steps=2 * episode_steps)  # n_steps is CACLA's logging period (PPO's rollout)
+    assert _dumps(model, tmp_path, EPISODES * episode_steps) == EPISODES // 2
 
 
 def test_log_interval_one_still_logs_every_update(make_model, episode_steps, tmp_path) -> None:

@@ -179,7 +179,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         self: SelfCACLA,
         total_timesteps: int,
         callback: MaybeCallback = None,
-        log_interval: int = 4,
+        log_interval: int = 1,  # rollouts of n_steps (its logging period), as SB3's on-policy algorithms
         tb_log_name: str = "CACLA",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
