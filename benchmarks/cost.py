@@ -164,13 +164,16 @@ def plan(cost_dir: Path = COST_DIR, sweep_dir: Path = SWEEP_DIR) -> pd.DataFrame
             continue
         done = set(zip(finished["algo"], finished["env"], finished["seed"], strict=True))
         cells = suite.cells()
-        total = sum(lookup.get((a, e), np.nan) for a, e, _ in cells)
-        left = sum(lookup.get((a, e), np.nan) for a, e, s in cells if (a, e, s) not in done)
-        per_algo = pd.Series({a: sum(lookup.get((a, e), np.nan) for b, e, _ in cells if b == a) / 3600 for a in suite.algos})
+        estimate = {c: lookup.get(c[:2], np.nan) for c in cells}
+        unmeasured = sorted({f"{a} on {e}" for (a, e, _), v in estimate.items() if not np.isfinite(v)})
+        total = np.nansum(list(estimate.values()))
+        left = np.nansum([v for c, v in estimate.items() if c not in done])
+        per_algo = {a: np.nansum([v for c, v in estimate.items() if c[0] == a]) / 3600 for a in suite.algos}
         lines += [f"Suite `{suite.name}`: {len(cells)} runs, about {total / 3600:.1f} CPU hours "
                   f"({total / 3600 / SESSION_CORE_HOURS:.1f} sessions on one core at {SESSION_CORE_HOURS} core hours each); "
                   f"still to run: {left / 3600:.1f} CPU hours. Per algorithm (CPU hours): "
-                  + ", ".join(f"{a} {h:.2f}" for a, h in per_algo.items()) + ".", ""]  # fmt: skip
+                  + ", ".join(f"{a} {h:.2f}" for a, h in per_algo.items()) + "."
+                  + (f" Not measured (left out of the sums): {', '.join(unmeasured)}." if unmeasured else ""), ""]  # fmt: skip
     (cost_dir / "sweep_plan.md").write_text("\n".join(lines))
     return costs
 
