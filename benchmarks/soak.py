@@ -4,8 +4,10 @@
 
 Trains the default ``DENFAC("MlpPolicy", env)`` for ``--episodes`` episodes and records, per episode, the process's
 resident memory (``/proc/self/statm``, no psutil) at the episode's end and the wall time of the update that follows it
-(``DENFAC.train``). The replay buffer (D = 100 000) is preallocated, so memory should stay flat once the first updates
-have run; the update time grows with the transitions in D until D is full (Pendulum: 500 episodes), then stays flat.
+(``DENFAC.train``). The replay buffer's arrays are allocated at construction, but the OS maps their pages as they are
+first written, and the update's working tensors grow with the transitions in D: memory and update time may grow until
+D is full (Pendulum, D = 100 000: episode 500; ``--buffer-size`` reaches that state sooner), and growth after that
+would be a leak.
 Writes ``soak.json`` (every episode, the summary, commit, machine, load) and ``soak.md`` (the summary) to ``--output``.
 """
 
@@ -57,13 +59,14 @@ def summarise(rss: list[float], update_s: list[float], window: int = 100) -> dic
     }
 
 
-def run(episodes: int, env_id: str, seed: int) -> dict[str, Any]:
+def run(episodes: int, env_id: str, seed: int, buffer_size: int | None = None) -> dict[str, Any]:
     import gymnasium as gym
     from stable_baselines3.common.callbacks import BaseCallback
 
     from sb3_denfac import DENFAC
 
-    model = DENFAC("MlpPolicy", gym.make(env_id), seed=seed)
+    kwargs = {} if buffer_size is None else {"buffer_size": buffer_size}
+    model = DENFAC("MlpPolicy", gym.make(env_id), seed=seed, **kwargs)
     update_s: list[float] = []
     rss: list[float] = []
     train = model.train
@@ -90,11 +93,12 @@ def run(episodes: int, env_id: str, seed: int) -> dict[str, Any]:
 
 
 def write_markdown(report: dict[str, Any], path: Path) -> None:
-    s, git, machine = report["summary"], report["git"], report["machine"]
+    s, git, machine, size = report["summary"], report["git"], report["machine"], report["buffer_size"]
     lines = [
-        f"# Soak: DENFAC (defaults) on {report['env']}, {s['episodes']} episodes",
+        f"# Soak: DENFAC ({'defaults' if size is None else f'D = {size}'}) on {report['env']}, {s['episodes']} episodes",
         "",
-        f"Written by `python -m benchmarks.soak --episodes {report['requested_episodes']}`. Commit "
+        f"Written by `python -m benchmarks.soak --episodes {report['requested_episodes']}"
+        f"{'' if size is None else f' --buffer-size {size}'}`. Commit "
         f"`{git.get('commit', '?')}`{' (with uncommitted changes)' if git.get('modified') else ''}; machine: "
         f"{machine['cpu_model']}, {machine['nproc']} CPUs, torch {machine['torch']}; load average at start / end: "
         f"{', '.join(f'{x:.2f}' for x in report['loadavg_start'])} / {', '.join(f'{x:.2f}' for x in report['loadavg_end'])}; "
@@ -108,8 +112,8 @@ def write_markdown(report: dict[str, Any], path: Path) -> None:
         f"| update time (s) | {s['update_s_median_first']:.3f} | {s['update_s_median_last']:.3f} | "
         f"{s['update_s_slope_per_episode']:.5f} | {s['update_s_slope_per_episode_second_half']:.5f} |",
         "",
-        "The update time grows while the replay buffer D (100 000 transitions) fills, as the update's targets and weights "
-        "are computed over all of D; memory is preallocated.",
+        "Memory and update time may grow while the replay buffer D fills (its pages are mapped as they are first written; "
+        "the update's targets and weights are computed over all of D); growth once D is full would be a leak.",
         "",
     ]
     path.write_text("\n".join(lines))
@@ -120,6 +124,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--env", default="Pendulum-v1")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--buffer-size", type=int, default=None, help="D (default: DENFAC's); small: D full sooner")
     parser.add_argument("--output", type=Path, default=Path("benchmarks/results/soak"))
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -128,11 +133,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     from benchmarks.task import git_state, machine_info
 
     load_start = os.getloadavg()
-    result = run(args.episodes, args.env, args.seed)
+    result = run(args.episodes, args.env, args.seed, args.buffer_size)
     report = {
         "env": args.env,
         "requested_episodes": args.episodes,
         "seed": args.seed,
+        "buffer_size": args.buffer_size,
         "summary": summarise(result["rss_mib"], result["update_s"]),
         "loadavg_start": load_start,
         "loadavg_end": os.getloadavg(),
