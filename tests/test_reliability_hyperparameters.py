@@ -27,7 +27,7 @@ INVALID = {
         (dict(actor_learning_rate=-1.0), "actor_learning_rate"),
         (dict(batch_size=1), "batch_size"),
         (dict(sigma=-0.1), "sigma"),
-        (dict(gradient_steps=0), "gradient_steps"),
+        (dict(gradient_steps=-2), "gradient_steps"),  # 0 (collect only) and -1 (one per env step) are valid
         (dict(learning_rate=-1e-3), "learning_rate"),
         (dict(gamma=1.5), "gamma"),
     ],
