@@ -61,7 +61,6 @@ from sb3_denfac.zoo.config import (
     select_entry,
     validate_entry,
 )
-from sb3_denfac.zoo.usage import USAGE
 
 DEFAULT_ALGO = "denfac"
 DEFAULT_ENV = "sb3_denfac/ContinuousCartPole-v0"
@@ -304,14 +303,8 @@ COMMANDS: dict[str, Callable[[Sequence[str]], None]] = {
 }
 
 
-def main(argv: Sequence[str] | None = None) -> None:
-    """Console entry point ``sb3-denfac-zoo``."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        print(USAGE)
-        if argv and argv[0] not in ("-h", "--help"):
-            sys.exit(f"sb3-denfac-zoo: unknown command {argv[0]!r}")
-        return
+def main(argv: Sequence[str]) -> None:
+    """Run the command ``argv[0]`` of ``sb3-denfac-zoo`` (the usage and unknown commands: :func:`.usage.main`)."""
     register()
     try:
         COMMANDS[argv[0]](argv[1:])
