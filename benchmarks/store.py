@@ -29,12 +29,16 @@ def runs_path(results_dir: str | Path) -> Path:
     return Path(results_dir) / RUNS_FILE
 
 
+def _line(record: dict[str, Any]) -> str:
+    """One record as one JSON line (the format both writers share)."""
+    return json.dumps(record, separators=(",", ":"), allow_nan=True) + "\n"
+
+
 def append_record(results_dir: str | Path, record: dict[str, Any]) -> None:
     """Append one run (its own gzip member) and make it durable before returning."""
     path = runs_path(results_dir)
     path.parent.mkdir(parents=True, exist_ok=True)
-    line = (json.dumps(record, separators=(",", ":"), allow_nan=True) + "\n").encode()
-    data = gzip.compress(line, compresslevel=9, mtime=0)
+    data = gzip.compress(_line(record).encode(), compresslevel=9, mtime=0)
     with path.open("ab") as f:
         f.write(data)
         f.flush()
@@ -101,6 +105,6 @@ def write_records(results_dir: str | Path, records: list[dict[str, Any]]) -> Non
     path = runs_path(results_dir)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    text = "".join(json.dumps(record, separators=(",", ":"), allow_nan=True) + "\n" for record in records)
+    text = "".join(_line(record) for record in records)
     tmp.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))  # one member: compresses best
     os.replace(tmp, path)
