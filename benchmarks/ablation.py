@@ -131,6 +131,11 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default04+nets256"] = merge(c["default04"], dict(policy_kwargs=wide))
     c["default04+lr3e-4"] = merge(c["default04"], dict(learning_rate=3e-4))
     c["default04-proximal"] = merge(c["default04"], dict(actor_proximal=0.0))
+    # 0.5 candidates: TD3's target policy smoothing in eq. (4)'s targets (SAC's targets average over its stochastic
+    # next action; this is the deterministic actor's counterpart)
+    c["default04+smooth"] = merge(c["default04"], dict(target_policy_noise=0.2, target_noise_clip=0.5))
+    # the two critics' mean instead of their minimum in the targets (the minimum erases the sparse Acrobot's goal)
+    c["default04+mean"] = merge(c["default04"], dict(critic_target="mean"))
     return c
 
 

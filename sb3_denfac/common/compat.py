@@ -92,6 +92,8 @@ def denfac_attributes_of_old_files(model: Any) -> None:
     """Before SB3's ``load`` writes a file's attributes over the constructor's: what files of earlier versions did not
     save takes the value those versions ran with (0.2 and earlier: no proximal actor)."""
     model.actor_proximal = 0.0
+    model.target_policy_noise, model.target_noise_clip = 0.0, 0.5  # 0.4 and earlier: deterministic next actions
+    model.critic_target = "min"  # 0.4 (n_critics 2) took the minimum
 
 
 def record_policy_defaults(policy_kwargs: dict[str, Any], policy_class: type, default_net_arch: dict[str, Any]) -> None:

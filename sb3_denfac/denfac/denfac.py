@@ -37,7 +37,7 @@ from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.options import check_options, fitted_iterations
-from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
@@ -104,6 +104,11 @@ class DENFAC(
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
     :param update_to_data_ratio: rho (:mod:`~.options`): the update after an episode of n steps runs
         min(K, ceil(rho n / critic_steps)) fitted iterations; None (default, the paper): K at every update
+    :param target_policy_noise: std of the Gaussian noise added to pi_{k-1}(s') in the targets of eq. (4) (TD3's target
+        policy smoothing, in the scaled action space; default 0: the paper's deterministic next action)
+    :param target_noise_clip: the noise of ``target_policy_noise`` is clipped to +-this (TD3: 0.5)
+    :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "min" (default,
+        clipped double Q) or "mean" (their average)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -154,6 +159,9 @@ class DENFAC(
         priority_eps: float = 1e-3,
         actor_proximal: float = 1.0,
         update_to_data_ratio: float | None = None,
+        target_policy_noise: float = 0.0,
+        target_noise_clip: float = 0.5,
+        critic_target: str = "min",
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -178,6 +186,9 @@ class DENFAC(
         self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
             prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size
         )
+        self.target_policy_noise = check_number("target_policy_noise", target_policy_noise, minimum=0.0, note=" (0: off)")
+        self.target_noise_clip = check_number("target_noise_clip", target_noise_clip, minimum=0.0)
+        self.critic_target = check_choice("critic_target", critic_target, CRITIC_TARGETS)
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -297,7 +308,7 @@ class DENFAC(
         for _ in range(n_iterations):
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_actions = updater.actor(next_obs).clamp(-1.0, 1.0)
+                next_actions = self._target_actions(updater, next_obs)
                 q_targets = rewards + self.gamma * (1.0 - terminal) * updater.critic(next_obs, next_actions)
                 weights = self._importance_weights(updater, obs, next_obs, actions, log_prob_b)
                 updater.set_priorities(obs, actions, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
@@ -319,6 +330,16 @@ class DENFAC(
         self.logger.record("train/importance_weight_mean", weights.mean().item())
         self.logger.record("train/importance_weight_min", weights.min().item())
         self.logger.record("train/fitted_iterations", n_iterations)
+
+    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> th.Tensor:
+        """The next actions of eq. (4)'s targets: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise
+        clipped to +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at
+        every fitted iteration; clamped to the action bounds [-1, 1]."""
+        actions = updater.actor(next_obs)
+        if self.target_policy_noise > 0:
+            noise = th.randn_like(actions) * self.target_policy_noise
+            actions = actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)
+        return actions.clamp(-1.0, 1.0)
 
     def _importance_weights(
         self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor

@@ -27,6 +27,7 @@ import torch as th
 from torch import nn
 
 from sb3_denfac.denfac import eager_steps
+from sb3_denfac.denfac.policies import combine_critics
 from sb3_denfac.denfac.updaters import FitSettings, Updater
 
 
@@ -257,10 +258,9 @@ class FastUpdater(Updater):
 
     @th.no_grad()
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """min_j Q_j(s, a) in eval mode, (N, 1) like ``policy.critic.target_q(obs, actions)``."""
+        """Q_1..Q_n combined (``critic_target``) in eval mode, (N, 1) like ``policy.critic.target_q(obs, actions, how)``."""
         inputs = th.cat([obs.float(), actions], dim=1).t()
-        values = [net.eval_forward(inputs) for net in self.critic_nets]
-        return (values[0] if len(values) == 1 else th.stack(values).amin(dim=0)).t()
+        return combine_critics([net.eval_forward(inputs) for net in self.critic_nets], self.settings.critic_target).t()
 
     @th.no_grad()
     def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:

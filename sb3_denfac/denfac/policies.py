@@ -40,7 +40,7 @@ class DENFACCritic(BaseModel):
 
     ``qf`` is Q_1, the network the actor ascends (eq. 5); ``n_critics`` > 1 adds ``twin_qfs`` Q_2.. Q_n, each with its
     own initialisation, fitted to the same targets, which take the minimum over all of them (clipped double Q,
-    Fujimoto et al. 2018, TD3; :meth:`target_q`).
+    Fujimoto et al. 2018, TD3) or their mean (DENFAC's ``critic_target``; :meth:`target_q`).
 
     :param observation_space: observation space
     :param action_space: Box action space
@@ -100,9 +100,23 @@ class DENFACCritic(BaseModel):
         """Q_1(s, a), shape (N, 1): the value the actor ascends (SB3's ``q1_forward``)."""
         return self.qf(self.q_inputs(obs, actions))
 
-    def target_q(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """min_j Q_j(s, a), shape (N, 1): the bootstrap value of the targets of eq. (4) (clipped double Q)."""
-        return th.min(th.cat(self.all_q(obs, actions), dim=1), dim=1, keepdim=True).values
+    def target_q(self, obs: th.Tensor, actions: th.Tensor, how: str = "min") -> th.Tensor:
+        """The bootstrap value of the targets of eq. (4), shape (N, 1): Q_1, ..., Q_n combined by
+        :func:`combine_critics` (``how`` "min": clipped double Q)."""
+        return combine_critics(self.all_q(obs, actions), how)
+
+
+#: How several Q networks make the bootstrap value of eq. (4) (DENFAC's ``critic_target``).
+CRITIC_TARGETS = ("min", "mean")
+
+
+def combine_critics(values: list[th.Tensor], how: str) -> th.Tensor:
+    """min_j Q_j (``"min"``: clipped double Q, Fujimoto et al. 2018) or 1/n sum_j Q_j (``"mean"``: the ensemble's
+    average, without the minimum's pessimism) of same-shaped values; one network: its value."""
+    if len(values) == 1:
+        return values[0]
+    stacked = th.stack(values)
+    return stacked.amin(dim=0) if how == "min" else stacked.mean(dim=0)
 
 
 class DENFACPolicy(BasePolicy):

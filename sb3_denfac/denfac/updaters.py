@@ -4,7 +4,7 @@
 
 - ``actor(s)`` and ``critic(s, a)``: pi_{k-1} and Q_{k-1} in eval mode (running statistics), for the targets q_k and
   the importance weights c of eq. (4); with ``n_critics`` > 1 Q_{k-1} is the minimum over the critics (clipped double
-  Q, :class:`~sb3_denfac.denfac.policies.DENFACCritic`);
+  Q, :class:`~sb3_denfac.denfac.policies.DENFACCritic`) or their mean (``critic_target``);
 - ``set_priorities(s, a, q)``: with ``prioritized`` on, the TD errors q_k - Q_{k-1}(s, a) of the buffer, before any
   reset, set the sampling priorities of the iteration's mini-batches (:mod:`~sb3_denfac.denfac.options`);
 - ``reset_critic()`` and ``reset_actor()``: a random re-initialisation, with a fresh Adam state;
@@ -51,6 +51,7 @@ class FitSettings:
     priority_beta: float = 0.4  # w_i = (N P(i))^-beta / max_j (N P(j))^-beta
     priority_eps: float = 1e-3
     actor_proximal: float = 0.0  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
+    critic_target: str = "min"  # how several Q networks make the bootstrap value: "min" or "mean" (combine_critics)
 
     @staticmethod
     def of(model: Any) -> FitSettings:
@@ -67,6 +68,7 @@ class FitSettings:
             priority_beta=model.priority_beta,
             priority_eps=model.priority_eps,
             actor_proximal=model.actor_proximal,
+            critic_target=model.critic_target,
         )
 
 
@@ -117,7 +119,7 @@ class Updater(ABC):
 
     @abstractmethod
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """Q(s, a) in eval mode, shape (N, 1): the minimum over the Q networks (the one Q network of the paper)."""
+        """Q(s, a) in eval mode, shape (N, 1): the Q networks combined by ``critic_target`` (the paper's one network)."""
 
     @abstractmethod
     def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
@@ -160,7 +162,7 @@ class AutogradUpdater(Updater):
 
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         self.policy.critic.set_training_mode(False)
-        return self.policy.critic.target_q(obs, actions)
+        return self.policy.critic.target_q(obs, actions, self.settings.critic_target)
 
     def set_priorities(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor) -> None:
         settings = self.settings

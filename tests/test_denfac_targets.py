@@ -1,0 +1,113 @@
+"""DENFAC's target options of eq. (4): ``critic_target`` (how the Q networks make the bootstrap value) and
+``target_policy_noise`` / ``target_noise_clip`` (TD3's target policy smoothing of the next action); both updaters,
+validation, save/load, and files of earlier versions."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import torch as th
+
+from sb3_denfac.denfac import DENFAC
+from sb3_denfac.denfac.policies import combine_critics
+from sb3_denfac.denfac.updaters import FitSettings, make_updater
+
+SMALL = dict(n_fitted_iterations=1, critic_steps=5, actor_steps=5, seed=3, gamma=0.9)
+
+
+def _expected_targets(before, data, gamma, combine):
+    with th.no_grad():
+        next_actions = before.actor(data.next_observations).clamp(-1.0, 1.0)
+        values = th.cat(before.critic.all_q(data.next_observations, next_actions), dim=1)
+    return data.rewards + gamma * (1.0 - data.dones) * combine(values)
+
+
+def test_combine_critics():
+    values = [th.tensor([[1.0], [4.0]]), th.tensor([[3.0], [2.0]])]
+    th.testing.assert_close(combine_critics(values, "min"), th.tensor([[1.0], [2.0]]))
+    th.testing.assert_close(combine_critics(values, "mean"), th.tensor([[2.0], [3.0]]))
+    assert combine_critics(values[:1], "mean") is values[0]
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_mean_critic_target(target_action_env, update_path):
+    """critic_target="mean": q = r + gamma (1 - done) 1/n sum_j Q_j(s', pi(s')), on both updaters."""
+    model = DENFAC("MlpPolicy", target_action_env(), critic_target="mean", update_path=update_path, **SMALL).learn(30)
+    before = copy.deepcopy(model.policy)
+    before.set_training_mode(False)
+    model._update()
+    data = model.replay_buffer.all_samples()
+    expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
+    th.testing.assert_close(model._last_update_stats["q_targets"], expected, rtol=1e-4, atol=1e-5)
+    minimum = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
+    assert (expected > minimum + 1e-6).any()  # the default's minimum would give other targets
+
+
+def test_updaters_agree_on_the_mean(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), critic_target="mean", **SMALL).learn(30)
+    obs = model.replay_buffer.all_samples().observations
+    actions = model.actor(obs).detach()
+    settings = FitSettings.of(model)
+    assert settings.critic_target == "mean"
+    fast, plain = (make_updater(model.policy, settings, path).updater for path in ("fast", "plain"))
+    with th.no_grad():
+        th.testing.assert_close(fast.critic(obs, actions), plain.critic(obs, actions), rtol=1e-4, atol=1e-5)
+        th.testing.assert_close(plain.critic(obs, actions), model.critic.target_q(obs, actions, "mean"))
+
+
+def test_target_policy_noise_is_clipped_and_redrawn(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), target_policy_noise=0.5, target_noise_clip=0.1, **SMALL).learn(30)
+    updater = model._make_updater()
+    next_obs = model.replay_buffer.all_samples().next_observations
+    with th.no_grad():
+        clean = updater.actor(next_obs)
+        first, second = model._target_actions(updater, next_obs), model._target_actions(updater, next_obs)
+    noise = first - clean.clamp(-1.0, 1.0)
+    inside = (clean.abs() < 0.9).squeeze(1)  # away from the bounds, where the clamp cuts nothing
+    assert inside.any()
+    assert noise[inside].abs().max() <= 0.1 + 1e-6  # clipped to +-target_noise_clip
+    assert noise[inside].abs().max() > 0.05  # std 0.5: most draws reach the clip
+    assert not th.equal(first, second)  # a fresh draw at every fitted iteration
+    assert first.min() >= -1.0 and first.max() <= 1.0
+
+
+def test_no_target_noise_is_the_deterministic_next_action(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), **SMALL).learn(30)
+    assert model.target_policy_noise == 0.0 and model.critic_target == "min"
+    updater = model._make_updater()
+    next_obs = model.replay_buffer.all_samples().next_observations
+    with th.no_grad():
+        th.testing.assert_close(model._target_actions(updater, next_obs), updater.actor(next_obs).clamp(-1.0, 1.0))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(critic_target="max"), "critic_target must be one of"),
+        (dict(target_policy_noise=-0.1), "target_policy_noise"),
+        (dict(target_noise_clip=-1), "target_noise_clip"),
+    ],
+)
+def test_invalid_target_options(target_action_env, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        DENFAC("MlpPolicy", target_action_env(), **kwargs)
+
+
+def test_save_load_keeps_the_target_options(tmp_path, target_action_env):
+    model = DENFAC(
+        "MlpPolicy", target_action_env(), critic_target="mean", target_policy_noise=0.3, target_noise_clip=0.4, **SMALL
+    ).learn(30)
+    model.save(tmp_path / "model.zip")
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
+    assert (loaded.critic_target, loaded.target_policy_noise, loaded.target_noise_clip) == ("mean", 0.3, 0.4)
+
+
+def test_files_without_the_target_options_take_the_settings_they_ran_with(tmp_path, target_action_env):
+    """A file of 0.4 or earlier saved neither option: it loads with the minimum and deterministic next actions."""
+    model = DENFAC("MlpPolicy", target_action_env(), critic_target="mean", target_policy_noise=0.3, **SMALL)
+    for key in ("critic_target", "target_policy_noise", "target_noise_clip"):
+        delattr(model, key)  # as if the class had no such attribute when the file was written
+    model.save(tmp_path / "old.zip")
+    loaded = DENFAC.load(tmp_path / "old.zip", env=target_action_env())
+    assert (loaded.critic_target, loaded.target_policy_noise, loaded.target_noise_clip) == ("min", 0.0, 0.5)
