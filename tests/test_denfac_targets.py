@@ -111,3 +111,31 @@ def test_files_without_the_target_options_take_the_settings_they_ran_with(tmp_pa
     model.save(tmp_path / "old.zip")
     loaded = DENFAC.load(tmp_path / "old.zip", env=target_action_env())
     assert (loaded.critic_target, loaded.target_policy_noise, loaded.target_noise_clip) == ("min", 0.0, 0.5)
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_targets_on_the_mini_batches_rows_are_those_of_all_of_d(target_action_env, update_path):
+    """With mini-batches, q_k is computed for the rows the iteration's batches draw only: the same values as over D."""
+    model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, update_path=update_path, **SMALL).learn(40)
+    before = copy.deepcopy(model.policy)
+    before.set_training_mode(False)
+    model._update()
+    rows = model._last_update_stats["rows"]
+    data = model.replay_buffer.all_samples()
+    assert rows is not None and 8 <= len(rows) < len(data.observations)  # 5 steps x 8 draws out of 40
+    expected = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
+    th.testing.assert_close(model._last_update_stats["q_targets"], expected[rows], rtol=1e-4, atol=1e-5)
+
+
+def test_iteration_sample(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, critic_steps=6, actor_steps=4, seed=0)
+    updater = model._make_updater()
+    sample = updater.iteration_sample(100)
+    assert sample.critic_batches.shape == (6, 8) and sample.actor_batches.shape == (4, 8)
+    for rows, batches in ((sample.critic_rows, sample.critic_batches), (sample.actor_rows, sample.actor_batches)):
+        assert th.equal(rows, th.unique(rows)) and rows.min() >= 0 and rows.max() < 100  # sorted, no repeats
+        assert int(batches.max()) < len(rows) and len(th.unique(batches)) == len(rows)  # every row is read
+    assert updater.iteration_sample(8) is None  # the batch is the whole buffer
+    assert DENFAC("MlpPolicy", target_action_env(), batch_size=None)._make_updater().iteration_sample(100) is None
+    no_actor = DENFAC("MlpPolicy", target_action_env(), batch_size=8, actor_steps=0)._make_updater().iteration_sample(50)
+    assert no_actor.actor_rows is None and no_actor.actor_batches is None

@@ -306,26 +306,36 @@ class DENFAC(
         updater = self._make_updater()
         critic_loss = actor_objective = th.zeros(())
         for _ in range(n_iterations):
+            # With mini-batches, the iteration's batches are drawn first: q_k and c are then needed on their rows only
+            # (the same values as over all of D). ``rows`` None: the whole buffer.
+            sample = updater.iteration_sample(obs.shape[0])
+            rows = None if sample is None else sample.critic_rows
+            o, a, o2, r, done, lp_b = (
+                (x if rows is None else x[rows]) for x in (obs, actions, next_obs, rewards, terminal, log_prob_b)
+            )
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_actions = self._target_actions(updater, next_obs)
-                q_targets = rewards + self.gamma * (1.0 - terminal) * updater.critic(next_obs, next_actions)
-                weights = self._importance_weights(updater, obs, next_obs, actions, log_prob_b)
-                updater.set_priorities(obs, actions, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
+                q_targets = r + self.gamma * (1.0 - done) * updater.critic(o2, self._target_actions(updater, o2))
+                weights = self._importance_weights(updater, o, o2, a, lp_b)
+                updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
                 updater.reset_critic()
-            critic_loss = updater.fit_critic(obs, actions, q_targets, weights)
+            critic_loss = updater.fit_critic(o, a, q_targets, weights, None if sample is None else sample.critic_batches)
             if self.reset_actor:
                 updater.reset_actor()
-            actor_objective = updater.fit_actor(obs)
+            if sample is None or sample.actor_rows is None:
+                actor_objective = updater.fit_actor(obs)
+            else:
+                actor_objective = updater.fit_actor(obs[sample.actor_rows], sample.actor_batches)
         updater.finish()
         self._n_updates += 1
-        self._last_update_stats = dict(weights=weights, q_targets=q_targets)
+        # the last iteration's targets and weights, on the rows of D they were computed for (None: all of D)
+        self._last_update_stats = dict(weights=weights, q_targets=q_targets, rows=rows)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/critic_loss", float(critic_loss))
         self.logger.record("train/actor_loss", -float(actor_objective))
         self.logger.record("train/q_target_mean", q_targets.mean().item())
-        self.logger.record("train/n_transitions", obs.shape[0])
+        self.logger.record("train/n_transitions", obs.shape[0])  # |D|
         self.logger.record("train/update_time", time.perf_counter() - start)
         self.logger.record("train/importance_weight_mean", weights.mean().item())
         self.logger.record("train/importance_weight_min", weights.min().item())

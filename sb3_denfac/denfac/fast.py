@@ -263,7 +263,9 @@ class FastUpdater(Updater):
         return combine_critics([net.eval_forward(inputs) for net in self.critic_nets], self.settings.critic_target).t()
 
     @th.no_grad()
-    def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
+    def fit_critic(
+        self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor, batches: th.Tensor | None = None
+    ) -> th.Tensor:
         nets, steps = self.critic_nets, self.settings.critic_steps
         if self.fresh_bn_statistics(self.policy.critic):
             for net in nets:
@@ -271,7 +273,7 @@ class FastUpdater(Updater):
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
-        n = self.sample_count(n_full)
+        n = batches.shape[1] if batches is not None else self.sample_count(n_full)
         # Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
         workspaces = [eager_steps.Workspace(net.spec.sizes, n, inputs) for net in nets]
         fixed = [
@@ -281,7 +283,8 @@ class FastUpdater(Updater):
         scaled_full = c_t * (2.0 / n_full)
         losses = []
         for step in range(steps):
-            idx = self.batch_indices(n_full)  # one mini-batch for every Q network, as the autograd updater
+            # one mini-batch for every Q network, as the autograd updater
+            idx = batches[step] if batches is not None else self.batch_indices(n_full)
             if idx is None:
                 x, q, c2 = inputs, q_t, scaled_full
             else:
@@ -295,7 +298,7 @@ class FastUpdater(Updater):
         return losses[0]  # type: ignore[return-value]
 
     @th.no_grad()
-    def fit_actor(self, obs: th.Tensor) -> th.Tensor:
+    def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         net, steps = self.actor_net, self.settings.actor_steps
         if steps == 0:
             return th.zeros(())
@@ -307,7 +310,7 @@ class FastUpdater(Updater):
         w_first, b_first = critic_affines[0]
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         n_full = obs_t.shape[1]
-        n = self.sample_count(n_full)
+        n = batches.shape[1] if batches is not None else self.sample_count(n_full)
         ws = eager_steps.Workspace(net.spec.sizes, n, obs_t)
         fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
         critic_full = eager_steps.EvalCritic(
@@ -319,7 +322,7 @@ class FastUpdater(Updater):
             old_pi_full = net.eval_forward(obs_t, old_affines)
         objective = proximal = None
         for step in range(steps):
-            idx = self.batch_indices(n_full)
+            idx = batches[step] if batches is not None else self.batch_indices(n_full)
             o, critic = (obs_t, critic_full) if idx is None else (obs_t[:, idx], critic_full.subset(idx))
             if old_affines is not None:
                 proximal = (coef, old_pi_full if idx is None else net.eval_forward(o, old_affines))

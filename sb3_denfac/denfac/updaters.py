@@ -72,6 +72,16 @@ class FitSettings:
         )
 
 
+class IterationSample(NamedTuple):
+    """What one fitted iteration reads of D: the rows of its critic steps and of its actor steps (sorted transition
+    indices), and each step's mini-batch as indices into those rows, shape (steps, batch_size)."""
+
+    critic_rows: th.Tensor
+    critic_batches: th.Tensor
+    actor_rows: th.Tensor | None  # None: no actor step
+    actor_batches: th.Tensor | None
+
+
 class Updater(ABC):
     """What Algorithm 1 does to the networks of a :class:`~sb3_denfac.denfac.policies.DENFACPolicy` (module docstring).
 
@@ -83,11 +93,29 @@ class Updater(ABC):
         self.settings = settings
 
     def batch_indices(self, n: int) -> th.Tensor | None:
-        """Indices of one uniformly drawn mini-batch out of ``n`` samples, or None for the full batch."""
+        """Indices of one uniformly drawn mini-batch out of ``n`` samples (with replacement, as SB3's replay buffers
+        sample), or None for the full batch."""
         size = self.settings.batch_size
         if size is None or size >= n:
             return None
-        return th.randperm(n, device=self.policy.device)[:size]
+        return th.randint(n, (size,), device=self.policy.device)
+
+    def iteration_sample(self, n: int) -> IterationSample | None:
+        """The mini-batches of one fitted iteration over a buffer of ``n`` transitions, drawn before its targets so that
+        q_k and c are computed for the transitions they use only; None: every step reads the whole buffer (full batch)
+        or draws its own mini-batch (prioritised sampling, whose priorities need the TD errors of the whole buffer)."""
+        settings = self.settings
+        if settings.prioritized != "none" or settings.batch_size is None or settings.batch_size >= n:
+            return None
+        device = self.policy.device
+        critic_rows, critic_batches = th.unique(
+            th.randint(n, (settings.critic_steps, settings.batch_size), device=device), return_inverse=True
+        )
+        actor_rows = actor_batches = None
+        if settings.actor_steps > 0:
+            draws = th.randint(n, (settings.actor_steps, settings.batch_size), device=device)
+            actor_rows, actor_batches = th.unique(draws, return_inverse=True)
+        return IterationSample(critic_rows, critic_batches, actor_rows, actor_batches)
 
     def sample_count(self, n: int) -> int:
         """Samples per step out of ``n``: the whole buffer, or the mini-batch that :meth:`batch_indices` draws."""
@@ -122,12 +150,16 @@ class Updater(ABC):
         """Q(s, a) in eval mode, shape (N, 1): the Q networks combined by ``critic_target`` (the paper's one network)."""
 
     @abstractmethod
-    def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
-        """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2; returns the last step's loss."""
+    def fit_critic(
+        self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor, batches: th.Tensor | None = None
+    ) -> th.Tensor:
+        """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2, step i on the rows ``batches[i]`` (None: the full
+        batch, or mini-batches it draws itself); returns the last step's loss."""
 
     @abstractmethod
-    def fit_actor(self, obs: th.Tensor) -> th.Tensor:
-        """G Adam steps ascending 1/N sum Q(s, pi(s)) with the critic in eval mode; returns the last objective."""
+    def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
+        """G Adam steps ascending 1/N sum Q(s, pi(s)) with the critic in eval mode, step i on the rows ``batches[i]``
+        (as :meth:`fit_critic`); returns the last objective."""
 
     def finish(self) -> None:  # noqa: B027 (optional hook: the autograd updater keeps nothing outside the modules)
         """Called once after the K fitted iterations."""
@@ -182,13 +214,15 @@ class AutogradUpdater(Updater):
             return self.sampler.batch()
         return self.batch_indices(n), None
 
-    def fit_critic(self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor) -> th.Tensor:
+    def fit_critic(
+        self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor, batches: th.Tensor | None = None
+    ) -> th.Tensor:
         critic, settings = self.policy.critic, self.settings
         self.fresh_bn_statistics(critic)
         critic.set_training_mode(True)
         loss = th.zeros(())
-        for _ in range(settings.critic_steps):
-            idx, w = self.draw(obs.shape[0], settings.prioritized != "none")
+        for step in range(settings.critic_steps):
+            idx, w = (batches[step], None) if batches is not None else self.draw(obs.shape[0], settings.prioritized != "none")
             o, a, q, c = (
                 (obs, actions, q_targets, weights) if idx is None else (obs[idx], actions[idx], q_targets[idx], weights[idx])
             )
@@ -206,7 +240,7 @@ class AutogradUpdater(Updater):
         critic.set_training_mode(False)
         return loss.detach()
 
-    def fit_actor(self, obs: th.Tensor) -> th.Tensor:
+    def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         actor, critic, settings = self.policy.actor, self.policy.critic, self.settings
         objective = th.zeros(())
         if settings.actor_steps == 0:
@@ -216,8 +250,8 @@ class AutogradUpdater(Updater):
         critic.set_training_mode(False)  # ascend the fitted Q without touching its running statistics
         critic.requires_grad_(False)
         low, high = th.full((1,), -1.0, device=obs.device), th.full((1,), 1.0, device=obs.device)
-        for _ in range(settings.actor_steps):
-            idx, w = self.draw(obs.shape[0], settings.prioritized == "both")
+        for step in range(settings.actor_steps):
+            idx, w = (batches[step], None) if batches is not None else self.draw(obs.shape[0], settings.prioritized == "both")
             o = obs if idx is None else obs[idx]
             actor.optimizer.zero_grad(set_to_none=True)
             pi = actor(o)
