@@ -136,6 +136,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default04+smooth"] = merge(c["default04"], dict(target_policy_noise=0.2, target_noise_clip=0.5))
     # the two critics' mean instead of their minimum in the targets (the minimum erases the sparse Acrobot's goal)
     c["default04+mean"] = merge(c["default04"], dict(critic_target="mean"))
+    c["default04+mean+smooth"] = merge(c["default04+smooth"], dict(critic_target="mean"))
     return c
 
 

@@ -76,6 +76,7 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
             last10=float(score[-10:].mean()),
             best=float(best[-1]),
             first_above=first,
+            hits=int(hit.sum()),
             cpu_s=r["cpu_s"],
             cpu_per_ep=r["cpu_s_per_episode"],
             fallback_frac=stab,
@@ -139,6 +140,22 @@ def full_budget_options(runs: pd.DataFrame) -> list[str]:
     return out
 
 
+#: 0.5's candidates: one change each to 0.4's default (:data:`TWIN`; ``default04`` is the same configuration)
+CANDIDATES = ("default04+smooth", "default04+mean", "default04+mean+smooth", "default04+nets256", "default04+lr3e-4")
+
+
+def candidates(runs: pd.DataFrame) -> list[str]:
+    """0.4's default against each of :data:`CANDIDATES` at each env's full budget (Acrobot: 100 episodes)."""
+    out = []
+    for env in ("invertedpendulum", "hopper", "reacher", "acrobot", "pendulum", "cartpole", "halfcheetah"):
+        suffix = f" ({100} ep)" if DEFAULT_EPISODES.get(env) not in (None, 100, 40) else ""
+        configs = [f"{name}{suffix}" for name in (TWIN, *CANDIDATES)]
+        if ((runs.env == env) & runs.config.isin(configs[1:])).any():
+            out.append(f"### {env}\n")
+            out.append(table(runs, env, configs))
+    return out
+
+
 def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str:
     if runs.empty:
         return "(no runs)\n"
@@ -168,6 +185,7 @@ def table(runs: pd.DataFrame, env: str, configs: list[str] | None = None) -> str
                 "std Q/MC": f"{g['q_std/mc_std'].median():.2f}" if "q_std/mc_std" in g else "–",
                 "mean c": f"{g['iw_mean'].median():.2f}" if "iw_mean" in g else "–",
                 "fall-back frac": f"{g.fallback_frac.median():.2f}" if g.fallback_frac.notna().any() else "–",
+                "eps above thr": f"{g.hits.median():.0f}" if "hits" in g else "–",
                 "CPU s/ep": f"{g.cpu_per_ep.median():.2f}",
             }
         )
@@ -209,6 +227,11 @@ def main(argv: list[str] | None = None) -> int:
     out.append(table(r20, "halfcheetah", [*options, "good", "proto-per-critic", "proto-proxg1"]))
     out.append("## The proximal actor at full budgets (`default` = 0.2's default, `default+proximal` = 0.3's)\n")
     out.extend(full_budget_options(runs))
+    out.append(
+        "## 0.5 candidates: one change each to 0.4's default (`" + TWIN + "`), full budgets\n\n"
+        "`eps above thr`: episodes at the threshold (Acrobot: episodes that reach the goal), median over seeds.\n"
+    )
+    out.extend(candidates(runs))
     (results / "tables.md").write_text("\n".join(out))
     print("\n".join(out))
     return 0
