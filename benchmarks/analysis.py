@@ -29,6 +29,11 @@ RUN_FIELDS = [
     *("final_eval", "episodes_to_threshold", "fall_back", "cpu_per_episode", "gradient_steps", "trained"),
     *("hyperparams_source", "commit"),
 ]
+#: The rows of the user's answer (suite ``matched``): DENFAC's default against SAC at each schedule.
+ANSWER_ALGOS = ("denfac_default", "sac", "sac_matched", "td3_matched")
+#: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
+#: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes
+ANSWER_LEVELS = {"halfcheetah": 1000.0, "hopper": 1000.0}
 
 
 def _learning_starts(meta: dict) -> int:
@@ -131,6 +136,42 @@ def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str] = ANSWER_ALGOS) -> pd.DataFrame:
+    """Per env, per algorithm: medians over the runs that reached :data:`ANSWER_LEVELS` (else the env's threshold) of
+    the episodes, env steps and CPU seconds to first reach it (reached/runs), and over all runs the fall-back fraction
+    after the threshold and the last-10 mean."""
+    rows = []
+    for env in _env_order(runs["env"]):
+        facts = env_facts(env)
+        level = ANSWER_LEVELS.get(env, facts.threshold)
+        if level is None:
+            continue
+        op = "<" if facts.lower_is_better else ">="
+        row = {"env": env, "level": f"{op} {level:g}"}
+        for algo in algos:
+            r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
+            if r.empty:
+                row[ALGOS[algo].label] = "–"
+                continue
+            firsts = []
+            for seed in r["seed"]:
+                e = episodes[(episodes["algo"] == algo) & (episodes["env"] == env) & (episodes["seed"] == seed)]
+                reached = e[e["best_so_far"] < level] if facts.lower_is_better else e[e["best_so_far"] >= level]
+                if len(reached):
+                    firsts.append(reached.iloc[0])
+            hit = pd.DataFrame(firsts)
+            reach = (
+                f"{hit['episode'].median():.0f} ep, {hit['timesteps'].median():.0f} steps, "
+                f"{hit['cpu_time'].median():.0f} CPU s ({len(hit)}/{len(r)})"
+                if len(hit)
+                else f"never (0/{len(r)})"
+            )
+            fall_back = f"{r['fall_back'].median():.2f}" if r["fall_back"].notna().any() else "–"
+            row[ALGOS[algo].label] = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def _seed_list(seeds: pd.Series) -> str:
     s = sorted(int(x) for x in seeds)
     return f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) and len(s) > 2 else ",".join(map(str, s))
@@ -213,6 +254,12 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
                       "of the episodes after the first that reached it, the share below half the best so far (halfway "
                       f"from {_worst(facts)}).", ""]  # fmt: skip
         lines += [_md(env_table(runs, env)), ""]
+    if suite is not None and suite.name == "matched":
+        lines += ["## The user's answer: to the threshold, and after it", "",
+                  "Medians over the runs that reached the level (the env's threshold, or `analysis.ANSWER_LEVELS`) of "
+                  "the episodes, env steps and CPU seconds (cumulative, at the end of that episode) it took (reached/"
+                  "runs); over all runs, the fall-back fraction after the threshold and the last-10 mean.", "",
+                  _md(answer_table(episodes, runs)), ""]  # fmt: skip
     lines += aggregates(runs, envs, out, stem)
     if suite is None or suite.name == "figure3":
         table = verdicts.verdict_table(runs)

@@ -366,3 +366,26 @@ def test_bootstrap_intervals_are_reproducible_and_leave_numpys_generator_alone(m
         runs, "x", "y", ["pendulum"], "final_best"
     )
     assert (np.random.get_state()[1] == before).all()
+
+
+def test_answer_table_reports_data_and_cpu_to_the_level():
+    """Episodes, env steps and CPU seconds at the first episode whose best-so-far reaches the level, per algorithm."""
+    import pandas as pd
+
+    from benchmarks import analysis
+    from benchmarks.suites import ALGOS
+
+    rows = []
+    for seed, returns in enumerate(([500.0, 1000.0, 1000.0], [200.0, 300.0, 400.0])):
+        for i, ret in enumerate(returns):
+            best = max(returns[: i + 1])
+            rows.append(dict(algo="sac_matched", env="invertedpendulum", seed=seed, episode=i + 1, performance=ret,
+                             best_so_far=best, timesteps=100 * (i + 1), cpu_time=10.0 * (i + 1)))  # fmt: skip
+    episodes = pd.DataFrame(rows)
+    runs = pd.DataFrame([dict(algo="sac_matched", env="invertedpendulum", seed=s, fall_back=0.0, last10=v)
+                         for s, v in ((0, 833.3), (1, 300.0))])  # fmt: skip
+    table = analysis.answer_table(episodes, runs, algos=("sac_matched", "denfac_default"))
+    row = table.set_index("env").loc["invertedpendulum"]
+    assert row["level"] == ">= 1000"
+    assert row[ALGOS["sac_matched"].label].startswith("2 ep, 200 steps, 20 CPU s (1/2); fall-back 0.00")
+    assert row[ALGOS["denfac_default"].label] == "–"
