@@ -122,7 +122,7 @@ def test_targets_on_the_mini_batches_rows_are_those_of_all_of_d(target_action_en
     model._update()
     rows = model._last_update_stats["rows"]
     data = model.replay_buffer.all_samples()
-    assert rows is not None and 8 <= len(rows) < len(data.observations)  # 5 steps x 8 draws out of 40
+    assert rows is not None and len(rows) == 5 * 8  # 5 critic steps x 8 draws out of the 40 transitions
     expected = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
     th.testing.assert_close(model._last_update_stats["q_targets"], expected[rows], rtol=1e-4, atol=1e-5)
 
@@ -131,11 +131,27 @@ def test_iteration_sample(target_action_env):
     model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, critic_steps=6, actor_steps=4, seed=0)
     updater = model._make_updater()
     sample = updater.iteration_sample(100)
+    assert sample.critic_rows.shape == (48,) and sample.actor_rows.shape == (32,)
     assert sample.critic_batches.shape == (6, 8) and sample.actor_batches.shape == (4, 8)
     for rows, batches in ((sample.critic_rows, sample.critic_batches), (sample.actor_rows, sample.actor_batches)):
-        assert th.equal(rows, th.unique(rows)) and rows.min() >= 0 and rows.max() < 100  # sorted, no repeats
-        assert int(batches.max()) < len(rows) and len(th.unique(batches)) == len(rows)  # every row is read
+        assert rows.min() >= 0 and rows.max() < 100
+        assert th.equal(batches.flatten(), th.arange(len(rows)))  # step i reads its own 8 draws
+    draws = th.cat([updater.iteration_sample(100).critic_rows for _ in range(200)])
+    counts = th.bincount(draws, minlength=100).float()
+    assert counts.min() > 0 and counts.std() < 0.2 * counts.mean()  # uniform over the buffer
     assert updater.iteration_sample(8) is None  # the batch is the whole buffer
     assert DENFAC("MlpPolicy", target_action_env(), batch_size=None)._make_updater().iteration_sample(100) is None
     no_actor = DENFAC("MlpPolicy", target_action_env(), batch_size=8, actor_steps=0)._make_updater().iteration_sample(50)
     assert no_actor.actor_rows is None and no_actor.actor_batches is None
+
+
+def test_files_of_earlier_versions_get_the_target_settings_they_ran_with():
+    """What :func:`denfac_attributes_of_old_files` sets before SB3 writes a file's attributes (a file that saved none
+    of the three keeps these), whatever the constructor's defaults are."""
+    from types import SimpleNamespace
+
+    from sb3_denfac.common.compat import denfac_attributes_of_old_files
+
+    model = SimpleNamespace(critic_target="mean", target_policy_noise=0.2, target_noise_clip=0.1)
+    denfac_attributes_of_old_files(model)
+    assert (model.critic_target, model.target_policy_noise, model.target_noise_clip) == ("min", 0.0, 0.5)

@@ -58,6 +58,8 @@ class MultiActionEnv(gym.Env):
             adam_betas=(0.9, 0.999),
             policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), n_critics=3),
         ),
+        # one critic and one actor step per iteration: each step's rows are exactly one mini-batch, with batch norm
+        dict(batch_size=16, critic_steps=1, actor_steps=1, actor_proximal=1.0, adam_betas=(0.9, 0.999)),
         dict(
             actor_proximal=0.5,
             inverting_gradients=False,
@@ -194,8 +196,15 @@ def test_fast_path_is_device_agnostic(make_denfac, batch_size):
     loss = fast.fit_critic(obs, actions, q_targets, weights)
     fast.reset_actor()
     objective = fast.fit_actor(obs)
-    fast.finish()
     assert loss.device.type == objective.device.type == "meta"
+    if batch_size is not None:  # the mini-batches DENFAC draws for an iteration (iteration_sample) stay on the device
+        sample = fast.iteration_sample(n)
+        assert sample.critic_rows.device.type == sample.critic_batches.device.type == "meta"
+        rows = sample.critic_rows
+        loss = fast.fit_critic(obs[rows], actions[rows], q_targets[rows], weights[rows], sample.critic_batches)
+        objective = fast.fit_actor(obs[sample.actor_rows], sample.actor_batches)
+        assert loss.device.type == objective.device.type == "meta"
+    fast.finish()
 
 
 @pytest.mark.parametrize("inverting_gradients", [True, False])

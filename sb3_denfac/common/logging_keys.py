@@ -20,14 +20,16 @@ TRAIN_KEYS: dict[str, str] = {
     "positive TD error; averaged over the steps for DDPG and CACLA",
     "train/actor_learning_rate": "alpha_a, the actor's learning rate used by this update",
     "train/critic_learning_rate": "alpha_c, the critic's learning rate used by this update",
-    "train/q_target_mean": "mean of the critic's regression targets r + gamma Q(s', pi(s')) (DENFAC: q_t of eq. (4) over D "
-    "at the last fitted iteration; DDPG: over the mini-batches, with the target networks)",
+    "train/q_target_mean": "mean of the critic's regression targets r + gamma Q(s', pi(s')) (DENFAC: q_t of eq. (4) at the "
+    "last fitted iteration, over the rows its mini-batches read, or over D with a full batch; DDPG: over the "
+    "mini-batches, with the target networks)",
     "train/n_transitions": "transitions the update fitted on (DENFAC: the whole replay buffer D; NFAC: the episodes "
     "collected)",
     "train/update_time": "wall-clock seconds of the update (CACLA: of its online steps since the last log)",
     "train/positive_td_fraction": "fraction of transitions with a positive TD error delta (the actions the actor moves to)",
-    "train/importance_weight_mean": "mean of the truncated importance weights c_t over D (1 with weighting='none')",
-    "train/importance_weight_min": "minimum of the truncated importance weights c_t over D",
+    "train/importance_weight_mean": "mean of the truncated importance weights c_t (1 with weighting='none'), over the "
+    "rows of q_target_mean",
+    "train/importance_weight_min": "minimum of the truncated importance weights c_t over the rows of q_target_mean",
     "train/fitted_iterations": "K_e, fitted iterations run by the update (K unless update_to_data_ratio is set)",
     "train/actor_out_of_bounds": "fraction of the actor's raw outputs outside [-1, 1] (unbounded actor)",
     "train/cma_sigma": "CMA-ES's step size sigma after the generation",

@@ -74,7 +74,8 @@ class DENFAC(
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``
     :param buffer_size: D, size of the FIFO replay buffer (paper: 3000-6000)
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
-    :param batch_size: an int = one uniform mini-batch of that size per critic/actor step; None = full batch (paper)
+    :param batch_size: an int = one uniform mini-batch of that size (drawn with replacement) per critic/actor step;
+        None = full batch (paper)
     :param gamma: discount factor gamma
     :param n_fitted_iterations: K, fitted iterations per update (paper: 10)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)

@@ -274,10 +274,11 @@ class FastUpdater(Updater):
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
         n = batches.shape[1] if batches is not None else self.sample_count(n_full)
+        whole = batches is None and n == n_full  # every step reads all the rows given, in their order
         # Full batch: the first layer's input is the same at every step, normalised once (FixedStats).
         workspaces = [eager_steps.Workspace(net.spec.sizes, n, inputs) for net in nets]
         fixed = [
-            eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+            eager_steps.FixedStats(inputs, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and whole else None
             for net, ws in zip(nets, workspaces, strict=True)
         ]
         scaled_full = c_t * (2.0 / n_full)
@@ -311,14 +312,15 @@ class FastUpdater(Updater):
         obs_part_full = th.addmm(b_first.unsqueeze(1), w_first[:, :-action_dim], obs_t)  # fixed over the G steps
         n_full = obs_t.shape[1]
         n = batches.shape[1] if batches is not None else self.sample_count(n_full)
+        whole = batches is None and n == n_full  # every step reads all the rows given, in their order
         ws = eager_steps.Workspace(net.spec.sizes, n, obs_t)
-        fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and n == n_full else None
+        fixed = eager_steps.FixedStats(obs_t, ws.centred, net.spec.eps[0]) if net.spec.bn[0] and whole else None
         critic_full = eager_steps.EvalCritic(
             critic_affines, self.critic_net.spec.slopes, obs_part_full, action_dim, self.critic_net.spec.sizes, n
         )
         old_affines, coef = self.old_actor_affines, self.settings.actor_proximal
         old_pi_full = None  # pi_old on the whole buffer: once per fit when every step takes it all
-        if old_affines is not None and n == n_full:
+        if old_affines is not None and whole:
             old_pi_full = net.eval_forward(obs_t, old_affines)
         objective = proximal = None
         for step in range(steps):

@@ -8,10 +8,12 @@
 - ``set_priorities(s, a, q)``: with ``prioritized`` on, the TD errors q_k - Q_{k-1}(s, a) of the buffer, before any
   reset, set the sampling priorities of the iteration's mini-batches (:mod:`~sb3_denfac.denfac.options`);
 - ``reset_critic()`` and ``reset_actor()``: a random re-initialisation, with a fresh Adam state;
-- ``fit_critic(s, a, q, c)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for each Q
-  network, on the same mini-batches;
-- ``fit_actor(s)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked (with
-  ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
+- ``iteration_sample(n)``: with mini-batches, the iteration's critic and actor mini-batches, drawn first, so that the
+  targets are computed on the rows they read only (None: full batch, or prioritised sampling);
+- ``fit_critic(s, a, q, c, batches)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for
+  each Q network, on the same mini-batches (``batches``, or drawn by the updater);
+- ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
+  (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
 - ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
@@ -73,8 +75,8 @@ class FitSettings:
 
 
 class IterationSample(NamedTuple):
-    """What one fitted iteration reads of D: the rows of its critic steps and of its actor steps (sorted transition
-    indices), and each step's mini-batch as indices into those rows, shape (steps, batch_size)."""
+    """What one fitted iteration reads of D: the rows of its critic steps and of its actor steps (transition indices,
+    in draw order), and each step's mini-batch as indices into those rows, shape (steps, batch_size)."""
 
     critic_rows: th.Tensor
     critic_batches: th.Tensor
@@ -101,20 +103,22 @@ class Updater(ABC):
         return th.randint(n, (size,), device=self.policy.device)
 
     def iteration_sample(self, n: int) -> IterationSample | None:
-        """The mini-batches of one fitted iteration over a buffer of ``n`` transitions, drawn before its targets so that
-        q_k and c are computed for the transitions they use only; None: every step reads the whole buffer (full batch)
-        or draws its own mini-batch (prioritised sampling, whose priorities need the TD errors of the whole buffer)."""
+        """The mini-batches of one fitted iteration over a buffer of ``n`` transitions, drawn uniformly with replacement
+        (as SB3's replay buffers sample) before its targets, so that q_k and c are computed on the rows they read only;
+        None: every step reads the whole buffer (full batch) or draws its own mini-batch (prioritised sampling, whose
+        priorities need the TD errors of the whole buffer)."""
         settings = self.settings
         if settings.prioritized != "none" or settings.batch_size is None or settings.batch_size >= n:
             return None
-        device = self.policy.device
-        critic_rows, critic_batches = th.unique(
-            th.randint(n, (settings.critic_steps, settings.batch_size), device=device), return_inverse=True
-        )
-        actor_rows = actor_batches = None
-        if settings.actor_steps > 0:
-            draws = th.randint(n, (settings.actor_steps, settings.batch_size), device=device)
-            actor_rows, actor_batches = th.unique(draws, return_inverse=True)
+        device, size = self.policy.device, settings.batch_size
+
+        def draw(steps: int) -> tuple[th.Tensor, th.Tensor]:
+            # the rows in draw order (a row drawn twice is read twice); step i reads rows[i * size:(i + 1) * size]
+            rows = th.randint(n, (steps * size,), device=device)
+            return rows, th.arange(steps * size, device=device).view(steps, size)
+
+        critic_rows, critic_batches = draw(settings.critic_steps)
+        actor_rows, actor_batches = draw(settings.actor_steps) if settings.actor_steps > 0 else (None, None)
         return IterationSample(critic_rows, critic_batches, actor_rows, actor_batches)
 
     def sample_count(self, n: int) -> int:
