@@ -137,6 +137,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # the two critics' mean instead of their minimum in the targets (the minimum erases the sparse Acrobot's goal)
     c["default04+mean"] = merge(c["default04"], dict(critic_target="mean"))
     c["default04+mean+smooth"] = merge(c["default04+smooth"], dict(critic_target="mean"))
+    # more exploration instead (SAC reaches the sparse Acrobot's goal by its entropy-driven exploration, TD3 does not)
+    c["default04+sigma0.3"] = merge(c["default04"], dict(sigma=0.3))
     return c
 
 

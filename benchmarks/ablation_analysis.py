@@ -141,7 +141,10 @@ def full_budget_options(runs: pd.DataFrame) -> list[str]:
 
 
 #: 0.5's candidates: one change each to 0.4's default (:data:`TWIN`; ``default04`` is the same configuration)
-CANDIDATES = ("default04+smooth", "default04+mean", "default04+mean+smooth", "default04+nets256", "default04+lr3e-4")
+CANDIDATES = (
+    *("default04+smooth", "default04+mean", "default04+mean+smooth", "default04+sigma0.3"),
+    *("default04+nets256", "default04+lr3e-4", "default04-proximal"),
+)
 
 
 def candidates(runs: pd.DataFrame) -> list[str]:
