@@ -150,6 +150,7 @@ class Suite:
 
 
 _PAPER = ("denfac", "denfac_default", "nfac", "cacla", "cmaes")
+_MATCHED = ("sac_matched", "td3_matched")  # SB3's SAC and TD3 on DENFAC's schedule
 _THREE, _FIVE, _TEN = tuple(range(3)), tuple(range(5)), tuple(range(10))
 SUITES: dict[str, Suite] = {
     s.name: s
@@ -157,15 +158,17 @@ SUITES: dict[str, Suite] = {
         Suite(
             "figure3",
             FIGURE3_ENVS,
-            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq"), _FIVE)),
-            "the paper's Figure 3 comparison plus SB3 TD3/SAC and sb3-contrib CrossQ, on the paper's three envs, two "
-            "held-out Gymnasium envs, and the Acrobot with the authors' 75-decision episodes",
+            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq", *_MATCHED), _FIVE)),
+            "the paper's Figure 3 comparison plus SB3 TD3/SAC (at one step per env step and on DENFAC's schedule) and "
+            "sb3-contrib CrossQ, on the paper's three envs, two held-out Gymnasium envs, and the Acrobot with the "
+            "authors' 75-decision episodes",
         ),
         Suite(
             "generalisation",
             GENERALISATION_ENVS,
-            ((("denfac_default", "denfac", "sac", "crossq"), _FIVE),),
-            "DENFAC's default and faithful configurations against SAC and CrossQ, library defaults, five envs",
+            ((("denfac_default", "denfac", "sac", "crossq", *_MATCHED), _FIVE),),
+            "DENFAC's default and faithful configurations against SAC (at one step per env step and on DENFAC's "
+            "schedule), TD3 on DENFAC's schedule and CrossQ, library defaults, five envs",
         ),
         Suite(
             "matched",

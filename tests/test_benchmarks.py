@@ -106,15 +106,16 @@ def test_env_facts_and_budgets():
 
 def test_suites_and_cells():
     figure3_cells = runner.select_cells("figure3")
-    assert len(figure3_cells) == len(set(figure3_cells)) == 5 * 6 * 10 + 4 * 6 * 5
+    assert len(figure3_cells) == len(set(figure3_cells)) == 5 * 6 * 10 + 6 * 6 * 5
     for algo in ("denfac", "denfac_default", "nfac", "cacla", "cmaes"):
         assert suites.SUITES["figure3"].seeds(algo) == tuple(range(10))
     generalisation = runner.select_cells("generalisation")
-    assert {a for a, _, _ in generalisation} == {"denfac_default", "denfac", "sac", "crossq"}
-    assert len(generalisation) == 4 * 5 * 5 and set(generalisation) <= set(figure3_cells)  # shared runs
+    assert {a for a, _, _ in generalisation} == {"denfac_default", "denfac", "sac", "crossq", "sac_matched", "td3_matched"}
+    assert len(generalisation) == 6 * 5 * 5 and set(generalisation) <= set(figure3_cells)  # shared runs
     assert [c[2] for c in figure3_cells] == sorted(c[2] for c in figure3_cells)  # seed by seed
     assert runner.select_cells("generalisation", envs=["pendulum"], seeds=[0]) == [
-        ("denfac", "pendulum", 0), ("denfac_default", "pendulum", 0), ("sac", "pendulum", 0), ("crossq", "pendulum", 0)
+        ("denfac", "pendulum", 0), ("denfac_default", "pendulum", 0), ("sac", "pendulum", 0), ("crossq", "pendulum", 0),
+        ("sac_matched", "pendulum", 0), ("td3_matched", "pendulum", 0),
     ]  # fmt: skip
     with pytest.raises(ValueError, match="unknown --suite"):
         runner.select_cells("nope")
