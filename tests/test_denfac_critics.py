@@ -14,7 +14,8 @@ from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.fast import FastUpdater
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
-SMALL = dict(n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
+# the minimum (clipped double Q, critic_target="min") and deterministic next actions: the targets these tests recompute
+SMALL = dict(n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1, critic_target="min", target_policy_noise=0.0)
 
 
 @pytest.fixture

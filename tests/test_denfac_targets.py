@@ -14,6 +14,7 @@ from sb3_denfac.denfac.policies import combine_critics
 from sb3_denfac.denfac.updaters import FitSettings, make_updater
 
 SMALL = dict(n_fitted_iterations=1, critic_steps=5, actor_steps=5, seed=3, gamma=0.9)
+EXACT = dict(SMALL, target_policy_noise=0.0)  # deterministic next actions: the targets the tests recompute
 
 
 def _expected_targets(before, data, gamma, combine):
@@ -33,7 +34,7 @@ def test_combine_critics():
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
 def test_mean_critic_target(target_action_env, update_path):
     """critic_target="mean": q = r + gamma (1 - done) 1/n sum_j Q_j(s', pi(s')), on both updaters."""
-    model = DENFAC("MlpPolicy", target_action_env(), critic_target="mean", update_path=update_path, **SMALL).learn(30)
+    model = DENFAC("MlpPolicy", target_action_env(), critic_target="mean", update_path=update_path, **EXACT).learn(30)
     before = copy.deepcopy(model.policy)
     before.set_training_mode(False)
     model._update()
@@ -72,9 +73,10 @@ def test_target_policy_noise_is_clipped_and_redrawn(target_action_env):
     assert first.min() >= -1.0 and first.max() <= 1.0
 
 
-def test_no_target_noise_is_the_deterministic_next_action(target_action_env):
-    model = DENFAC("MlpPolicy", target_action_env(), **SMALL).learn(30)
-    assert model.target_policy_noise == 0.0 and model.critic_target == "min"
+def test_defaults_and_no_target_noise_is_the_deterministic_next_action(target_action_env):
+    default = DENFAC("MlpPolicy", target_action_env())
+    assert (default.critic_target, default.target_policy_noise, default.target_noise_clip) == ("mean", 0.2, 0.5)
+    model = DENFAC("MlpPolicy", target_action_env(), **EXACT).learn(30)
     updater = model._make_updater()
     next_obs = model.replay_buffer.all_samples().next_observations
     with th.no_grad():
@@ -116,14 +118,14 @@ def test_files_without_the_target_options_take_the_settings_they_ran_with(tmp_pa
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
 def test_targets_on_the_mini_batches_rows_are_those_of_all_of_d(target_action_env, update_path):
     """With mini-batches, q_k is computed for the rows the iteration's batches draw only: the same values as over D."""
-    model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, update_path=update_path, **SMALL).learn(40)
+    model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, update_path=update_path, **EXACT).learn(40)
     before = copy.deepcopy(model.policy)
     before.set_training_mode(False)
     model._update()
     rows = model._last_update_stats["rows"]
     data = model.replay_buffer.all_samples()
     assert rows is not None and len(rows) == 5 * 8  # 5 critic steps x 8 draws out of the 40 transitions
-    expected = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
+    expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
     th.testing.assert_close(model._last_update_stats["q_targets"], expected[rows], rtol=1e-4, atol=1e-5)
 
 

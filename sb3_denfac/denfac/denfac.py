@@ -62,9 +62,9 @@ class DENFAC(
     regression of the critic on them, then G steps of the actor ascending eq. (5) (:meth:`_update`).
 
     ``DENFAC("MlpPolicy", env)`` is the library default (mini-batch Adam on a kept actor and critic, the proximal actor,
-    two critics, 64-64 networks); ``DENFAC("MlpPolicy", env, **presets.PAPER)`` is Algorithm 1 as written
-    (:mod:`~sb3_denfac.denfac.presets`). Why the default differs from the paper, and the implementation's choices
-    (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
+    two critics whose mean makes the targets, with TD3's target policy smoothing, 64-64 networks); ``DENFAC("MlpPolicy",
+    env, **presets.PAPER)`` is Algorithm 1 as written (:mod:`~sb3_denfac.denfac.presets`). Why the default differs from
+    the paper, and the implementation's choices (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
     :param env: the environment (a single env: updates are episode-wise)
@@ -106,10 +106,10 @@ class DENFAC(
     :param update_to_data_ratio: rho (:mod:`~.options`): the update after an episode of n steps runs
         min(K, ceil(rho n / critic_steps)) fitted iterations; None (default, the paper): K at every update
     :param target_policy_noise: std of the Gaussian noise added to pi_{k-1}(s') in the targets of eq. (4) (TD3's target
-        policy smoothing, in the scaled action space; default 0: the paper's deterministic next action)
+        policy smoothing, in the scaled action space; default 0.2, TD3's; paper: 0, the deterministic next action)
     :param target_noise_clip: the noise of ``target_policy_noise`` is clipped to +-this (TD3: 0.5)
-    :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "min" (default,
-        clipped double Q) or "mean" (their average)
+    :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "mean" (default,
+        their average) or "min" (clipped double Q, 0.4's default)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -160,9 +160,9 @@ class DENFAC(
         priority_eps: float = 1e-3,
         actor_proximal: float = 1.0,
         update_to_data_ratio: float | None = None,
-        target_policy_noise: float = 0.0,
+        target_policy_noise: float = 0.2,
         target_noise_clip: float = 0.5,
-        critic_target: str = "min",
+        critic_target: str = "mean",
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,

@@ -2,15 +2,16 @@
 
 ``DENFAC("MlpPolicy", env)`` is the library default: the constructor's defaults and :class:`~.policies.DENFACPolicy`'s
 (fitted iterations of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose
-minimum makes the targets, 64-64 networks without batch norm, no importance weights; why: docs/denfac.md, measurements:
+mean makes the targets of eq. (4), with TD3's target policy smoothing of the next action, 64-64 networks without batch
+norm, no importance weights; why: docs/denfac.md, measurements:
 ``benchmarks/results/ablation/``).
 
 ``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common values:
 full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no proximal
-term), one critic, Retrace-style weights, batch norm, N(0, 0.01) weights, Adam step 0.1 with beta1 = 0 (the authors'
-solver), sigma = 0.05. The per-env values of Figure 5 (D, reset critic, inverting gradients, gamma, actor sizes, learning
-rates) are in the zoo YAML entries of the paper's envs, which start from this preset (``preset: paper``,
-:mod:`sb3_denfac.zoo.config`).
+term), one critic and the deterministic next action pi(s') in eq. (4), Retrace-style weights, batch norm, N(0, 0.01)
+weights, Adam step 0.1 with beta1 = 0 (the authors' solver), sigma = 0.05. The per-env values of Figure 5 (D, reset
+critic, inverting gradients, gamma, actor sizes, learning rates) are in the zoo YAML entries of the paper's envs, which
+start from this preset (``preset: paper``, :mod:`sb3_denfac.zoo.config`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ PAPER: dict[str, Any] = {
     "reset_critic": False,
     "weighting": "retrace",
     "actor_proximal": 0.0,
+    "target_policy_noise": 0.0,
     "sigma": 0.05,
     "policy_kwargs": {"net_arch": {"pi": [20], "qf": [50, 7]}, "batch_norm": True, "init": "paper", "n_critics": 1},
 }
