@@ -55,6 +55,16 @@ ALGOS: dict[str, Algo] = {
     for a in (
         Algo("denfac", "denfac", "DENFAC (faithful)", "paper"),
         Algo("denfac_default", "denfac", "DENFAC (default)", "paper"),
+        # 0.4's default (the two critics' minimum, deterministic next actions): the sweep's "DENFAC (default)" runs
+        # made before 0.5 changed the default, kept under this name
+        Algo(
+            "denfac_default04",
+            "denfac",
+            "DENFAC (0.4 default)",
+            "paper",
+            base="denfac_default",
+            overrides=(("critic_target", "min"), ("target_policy_noise", 0.0)),
+        ),  # fmt: skip
         Algo("nfac", "nfac", "NFAC+", "paper"),
         Algo("cacla", "cacla", "CACLA+", "paper"),
         Algo("cmaes", "cmaes", "CMA-ES", "paper"),
@@ -158,7 +168,7 @@ SUITES: dict[str, Suite] = {
         Suite(
             "figure3",
             FIGURE3_ENVS,
-            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq", *_MATCHED), _FIVE)),
+            ((_PAPER, _TEN), (("ddpg", "td3", "sac", "crossq", *_MATCHED), _FIVE), (("denfac_default04",), _TEN)),
             "the paper's Figure 3 comparison plus SB3 TD3/SAC (at one step per env step and on DENFAC's schedule) and "
             "sb3-contrib CrossQ, on the paper's three envs, two held-out Gymnasium envs, and the Acrobot with the "
             "authors' 75-decision episodes",
@@ -173,7 +183,7 @@ SUITES: dict[str, Suite] = {
         Suite(
             "matched",
             MATCHED_ENVS,
-            ((("denfac_default", "denfac", "sac", "sac_matched", "td3_matched"), _FIVE),),
+            ((("denfac_default", "denfac_default04", "denfac", "sac", "sac_matched", "td3_matched"), _FIVE),),
             "the default DENFAC against SB3's SAC and TD3 given DENFAC's schedule (train at every episode end, as many "
             "critic steps as DENFAC) and SAC at one step per env step; equal episodes, gradient steps and CPU reported",
         ),

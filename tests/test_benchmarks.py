@@ -106,7 +106,7 @@ def test_env_facts_and_budgets():
 
 def test_suites_and_cells():
     figure3_cells = runner.select_cells("figure3")
-    assert len(figure3_cells) == len(set(figure3_cells)) == 5 * 6 * 10 + 6 * 6 * 5
+    assert len(figure3_cells) == len(set(figure3_cells)) == 6 * 6 * 10 + 6 * 6 * 5
     for algo in ("denfac", "denfac_default", "nfac", "cacla", "cmaes"):
         assert suites.SUITES["figure3"].seeds(algo) == tuple(range(10))
     generalisation = runner.select_cells("generalisation")
@@ -126,7 +126,7 @@ def test_suites_and_cells():
     frozen = suites.load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
     matched = runner.select_cells("matched")
-    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 5 * 7 * 5
+    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 6 * 7 * 5
     ablation = suites.SUITES["ablation"]
     assert ablation.study == "ablation" and ablation.diagnostics_every > 0
     assert runner.default_results_dir("ablation").name == "ablation" and runner.default_results_dir(None).name == "sweep"
