@@ -30,7 +30,7 @@ RUN_FIELDS = [
     *("hyperparams_source", "commit"),
 ]
 #: The rows of the user's answer (suite ``matched``): DENFAC's default against SAC at each schedule.
-ANSWER_ALGOS = ("denfac_default", "sac", "sac_matched", "td3_matched")
+ANSWER_ALGOS = ("denfac_default", "denfac_default04", "sac", "sac_matched", "td3_matched")
 #: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
 #: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes
 ANSWER_LEVELS = {"halfcheetah": 1000.0, "hopper": 1000.0}
@@ -284,7 +284,7 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
             f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
         ]
         lines += [f"IQM of the normalised {meaning}:", "", _md(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
-    for denfac in ("denfac", "denfac_default"):
+    for denfac in ("denfac", "denfac_default", "denfac_default04"):
         if denfac not in set(runs["algo"]):
             continue
         rows = []

@@ -85,7 +85,7 @@ def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
         if goal is not None:
             rows.append(goal)
     envs = list(dict.fromkeys(runs["env"]))
-    for denfac in ("denfac", "denfac_default"):
+    for denfac in ("denfac", "denfac_default", "denfac_default04"):  # 0.4's default until 0.5's has its runs
         for peer in PEERS:
             for env in envs:
                 add(f"{_label(denfac)} more data-efficient than {_label(peer)}", env, [(denfac, peer, "better")])
