@@ -235,21 +235,26 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
 
 
 def test_denfac_sampler_tunes_the_stability_options() -> None:
-    """The DENFAC sampler offers both values of n_critics and the plain ascent (lambda 0) besides proximal actors, and
-    the model the zoo builds from a trial has what was sampled."""
+    """The DENFAC sampler offers both values of n_critics, the plain ascent (lambda 0) besides proximal actors, both
+    critic targets with and without smoothing, and the model the zoo builds from a trial has what was sampled."""
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("denfac")), ENV)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     seen: set[tuple[int, bool]] = set()
-    for _ in range(12):
+    targets: set[tuple[str, bool]] = set()
+    for _ in range(16):
         trial = study.ask()
         trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry["policy_kwargs"])
         sampled = zoo_samplers.sample_denfac_params(trial, 1, 1, {})
         model = zoo.make_model("denfac", ENV, {**entry, **sampled}, device="cpu")
         assert len(model.critic.q_networks) == trial.params["n_critics"]
         assert model.actor_proximal == trial.params["actor_proximal"]
+        assert model.critic_target == trial.params["critic_target"]
+        assert model.target_policy_noise == trial.params["target_policy_noise"]
         seen.add((trial.params["n_critics"], trial.params["actor_proximal"] > 0))
+        targets.add((trial.params["critic_target"], trial.params["target_policy_noise"] > 0))
         model.get_env().close()
     assert seen == {(1, False), (1, True), (2, False), (2, True)}
+    assert targets == {("mean", False), ("mean", True), ("min", False), ("min", True)}
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)

@@ -7,9 +7,11 @@ that trial trained with.
 
 Search spaces follow the dimensions of the paper's Figure 5 (learning rates alpha_a / alpha_c, inverting gradient,
 mini-batch size, tau, additional updates, K, G, D, reset critic) plus the exploration sigma and the network sizes;
-DENFAC's also offers the two stability options of its default configuration (``actor_proximal`` lambda, 0 = the
-paper's plain ascent of eq. (5), and ``n_critics``, 1 = the paper's single critic in the targets of eq. (4)), since
-neither is right everywhere: the minimum over critics also lowers the value of a sparse reward.
+DENFAC's also offers the stability options of its default configuration (``actor_proximal`` lambda, 0 = the
+paper's plain ascent of eq. (5); ``n_critics``, 1 = the paper's single critic in the targets of eq. (4);
+``critic_target``, the critics' mean or minimum in those targets; ``target_policy_noise``, 0 = the paper's
+deterministic next action pi(s')), since none is right everywhere: the minimum over critics also lowers the value of a
+sparse reward.
 gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
 ``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
 
@@ -74,14 +76,15 @@ def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
 
 def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes, the
-    proximal actor's lambda and the number of critics."""
+    proximal actor's lambda, the number of critics, and how eq. (4)'s targets combine them (``critic_target``) and
+    smooth the next action (``target_policy_noise``; 0 = the paper's pi(s'))."""
     params = {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
         "n_fitted_iterations": trial.suggest_int("n_fitted_iterations", 1, 20),
         "actor_steps": trial.suggest_int("actor_steps", 5, 50),
         "critic_steps": trial.suggest_int("critic_steps", 5, 50),
-        "buffer_size": trial.suggest_categorical("buffer_size", [1000, 3000, 6000, 10000]),
+        "buffer_size": trial.suggest_categorical("buffer_size", [1000, 3000, 6000, 10000, 100_000]),
         "reset_critic": trial.suggest_categorical("reset_critic", [False, True]),
         "inverting_gradients": trial.suggest_categorical("inverting_gradients", [False, True]),
         "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
@@ -89,6 +92,8 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
         "actor_proximal": trial.suggest_categorical("actor_proximal", [0.0, 0.3, 1.0, 3.0]),
         "n_critics": trial.suggest_categorical("n_critics", [1, 2]),
+        "critic_target": trial.suggest_categorical("critic_target", ["mean", "min"]),
+        "target_policy_noise": trial.suggest_categorical("target_policy_noise", [0.0, 0.1, 0.2, 0.3]),
     }
     return _sampled(trial, convert_denfac_params(params))
 
