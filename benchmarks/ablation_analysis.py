@@ -144,6 +144,9 @@ def full_budget_options(runs: pd.DataFrame) -> list[str]:
 CANDIDATES = (
     *("default04+smooth", "default04+mean", "default04+mean+smooth", "default04+sigma0.3"),
     *("default04+nets256", "default04+lr3e-4", "default04-proximal"),
+    # the 0.5 default (default05 = default04+mean+smooth) on the sparse Acrobot, one change at a time
+    *("default05+gamma0.99", "default05-proximal", "default05+per-critic", "default05+sigma0.3"),
+    *("faithful", "faithful+gamma0.99"),
 )
 
 
