@@ -192,22 +192,29 @@ def _md(df: pd.DataFrame) -> str:
 def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
     """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the CPU hours still needed: the median
     CPU seconds of the cell's finished runs times the seeds left, or where it has none, the plan's estimate
-    (``benchmarks.cost``, full-length episodes: an upper bound where episodes end early), marked <=."""
+    (``benchmarks.cost``, full-length episodes: an upper bound where episodes end early), marked <=. A cell with
+    neither is marked "cost not measured" and counted apart in the total."""
     done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
     measured = runs.groupby(["algo", "env"])["cpu_time"].median().to_dict() if not runs.empty else {}
     rows = {}
     for algo in suite.algos:
         want = suite.seeds(algo)
-        row, hours = {}, 0.0
+        row, hours, unmeasured = {}, 0.0, 0
         for env in suite.envs:
             left = sum((algo, env, s) not in done for s in want)
-            per_run = measured.get((algo, env), estimated_cost(algo, env))
-            cost = left * per_run / 3600
-            hours += cost
-            bound = "" if (algo, env) in measured else "<="
-            row[env] = f"{len(want) - left}/{len(want)}" + (f", {bound}{cost:.2f} h" if left and np.isfinite(cost) else "")
-        if hours != 0.0:
-            rows[ALGOS[algo].label] = {**row, "CPU hours left": f"{hours:.2f}"}
+            row[env] = f"{len(want) - left}/{len(want)}"
+            if not left:
+                continue
+            cost = left * measured.get((algo, env), estimated_cost(algo, env)) / 3600
+            if np.isfinite(cost):
+                hours += cost
+                row[env] += f", {'' if (algo, env) in measured else '<='}{cost:.2f} h"
+            else:
+                unmeasured += 1
+                row[env] += ", cost not measured"
+        if hours or unmeasured:
+            total = f"{hours:.2f}" + (f" + {unmeasured} cells not measured" if unmeasured else "")
+            rows[ALGOS[algo].label] = {**row, "CPU hours left": total}
     return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
 
 

@@ -347,6 +347,10 @@ def test_missing_cells_cost_the_seeds_left_from_measured_runs():
     planned = 3 * suites.estimated_cost("sac", "cartpole") / 3600
     assert row["cartpole"] == f"0/3, <={planned:.2f} h"  # no run yet: the plan's upper bound
     assert float(row["CPU hours left"]) == pytest.approx(1.5 + planned, abs=0.01)
+    unplanned = suites.Suite("u", ("pendulum", "no-such-env"), ((("sac",), (0, 1, 2)),), "test")
+    row = analysis.missing_cells(unplanned, runs).iloc[0]
+    assert row["no-such-env"] == "0/3, cost not measured"  # neither a run nor the plan's estimate: said, not NaN
+    assert row["CPU hours left"] == "1.50 + 1 cells not measured"
 
 
 def test_bootstrap_intervals_are_reproducible_and_leave_numpys_generator_alone(monkeypatch):
