@@ -148,6 +148,10 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["default05+per-critic"] = merge(c["default05"], dict(prioritized="critic"))
     c["default05+sigma0.3"] = merge(c["default05"], dict(sigma=0.3))
     c["faithful+gamma0.99"] = merge(FAITHFUL, dict(gamma=0.99))  # the same horizon for the paper's DENFAC
+    # The diagnosis of issue #23 on 0.5's default (suite `diagnosis`): SAC's width and learning rate moved into it, one
+    # at a time (``default05-proximal`` above: no proximal term, as SAC has none)
+    c["default05+nets256"] = merge(c["default05"], dict(policy_kwargs=wide))
+    c["default05+lr3e-4"] = merge(c["default05"], dict(learning_rate=3e-4))
     return c
 
 

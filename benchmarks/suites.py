@@ -193,7 +193,7 @@ SUITES: dict[str, Suite] = {
             (
                 (("sac_matched", "td3_matched", "sac_matched_64", "sac_matched_frozen"), _THREE),
                 (
-                    tuple(f"abl:{c}" for c in ("default04", "default04+nets256", "default04+lr3e-4", "default04-proximal")),
+                    tuple(f"abl:{c}" for c in ("default05", "default05+nets256", "default05+lr3e-4", "default05-proximal")),
                     _THREE,
                 ),
             ),  # fmt: skip

@@ -116,8 +116,8 @@ class DENFAC(
     :param tensorboard_log: TensorBoard log directory (None: no logging)
     :param policy_kwargs: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper ``dict(pi=[20], qf=[50, 7])``),
         ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's; "paper": N(0, 0.01^2)), ``n_critics``
-        (default 2: targets from their minimum; paper 1), ``bn_momentum``, ``activation_fn``: :class:`DENFACPolicy`,
-        whose defaults apply to the keys left out (and are saved with the model)
+        (default 2, whose mean or minimum makes the targets: ``critic_target``; paper 1), ``bn_momentum``,
+        ``activation_fn``: :class:`DENFACPolicy`, whose defaults apply to the keys left out (and are saved with the model)
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
