@@ -122,7 +122,7 @@ def test_suites_and_cells():
     with pytest.raises(ValueError, match="unknown --algos"):
         runner.select_cells(None, ["nope"], ["cartpole"], [0])
     diagnosis = runner.select_cells("diagnosis")  # both ways: SAC's ingredients into DENFAC, DENFAC's into SAC
-    assert len(diagnosis) == 8 * 3 * 3 and {"abl:default05", "sac_matched_frozen"} <= {a for a, _, _ in diagnosis}
+    assert len(diagnosis) == 8 * 4 * 3 and {"abl:default05", "sac_matched_frozen"} <= {a for a, _, _ in diagnosis}
     frozen = suites.load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
     matched = runner.select_cells("matched")
