@@ -152,6 +152,9 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # at a time (``default05-proximal`` above: no proximal term, as SAC has none)
     c["default05+nets256"] = merge(c["default05"], dict(policy_kwargs=wide))
     c["default05+lr3e-4"] = merge(c["default05"], dict(learning_rate=3e-4))
+    # Pendulum, where the matched SAC first holds the pendulum up at episode 10 and 0.5's default at 18: SAC's wider
+    # early exploration (its entropy term; SB3's 100 uniform warm-up steps) in DENFAC's terms
+    c["default05+warmup200"] = merge(c["default05"], dict(learning_starts=200))
     return c
 
 
