@@ -147,6 +147,8 @@ CANDIDATES = (
     # the 0.5 default (default05 = default04+mean+smooth) on the sparse Acrobot, one change at a time
     *("default05+gamma0.99", "default05-proximal", "default05+per-critic", "default05+sigma0.3"),
     *("faithful", "faithful+gamma0.99"),
+    # Pendulum: SAC's settings in 0.5's default, and a uniform warm-up episode (section 14)
+    *("default05", "default05+nets256", "default05+lr3e-4", "default05+warmup200"),
 )
 
 
