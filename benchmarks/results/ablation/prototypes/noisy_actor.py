@@ -18,34 +18,18 @@ import sys
 import torch as th
 
 from benchmarks import run
-from sb3_denfac.denfac import eager_steps
+from sb3_denfac.denfac.eager_steps import EvalCritic
 
 SIGMA = float(os.environ.get("AN_SIGMA", "0.1"))
+_action_gradient = EvalCritic.action_gradient
 
 
-def actor_step(net, ws, obs, fixed, critic, max_grad_norm, inverting, want_objective, proximal=None):
-    """``eager_steps.actor_step`` with dQ/da taken at the noisy action."""
-    factors = net.advance()
-    folds = eager_steps.forward_train(net, ws, obs, fixed)
-    eager_steps.update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
-    if fixed is not None:
-        fixed.step(factors[0])
-    pi = ws.outputs[-1]
-    noisy = th.randn_like(pi).mul_(SIGMA).add_(pi).clamp_(-1.0, 1.0)
-    ascent, objective = critic.action_gradient(noisy, want_objective)
-    if inverting:
-        ascent = eager_steps.invert_gradients_unit_box(ascent, pi, out=critic.inverted)
-    if proximal is None:
-        grad_pi = ascent.neg_()
-    else:
-        coef, old_pi = proximal
-        scale = float(th.linalg.vector_norm(ascent, dim=0).sum().clamp_(min=1e-12))
-        grad_pi = th.sub(pi, old_pi).mul_(2.0 * coef / pi.shape[1]).sub_(ascent.div_(scale))
-    eager_steps.backward(net, ws, obs, folds, grad_pi)
-    eager_steps.adam_step(net, max_grad_norm)
-    return objective
+def action_gradient(self, pi, want_value):
+    """``EvalCritic.action_gradient`` at the noisy action (its one caller, ``eager_steps.actor_step``, keeps pi(s)
+    for inverting gradients and the proximal term)."""
+    return _action_gradient(self, th.randn_like(pi).mul_(SIGMA).add_(pi).clamp_(-1.0, 1.0), want_value)
 
 
 if __name__ == "__main__":
-    eager_steps.actor_step = actor_step
+    EvalCritic.action_gradient = action_gradient
     sys.exit(run.main(sys.argv[1:]))
