@@ -11,6 +11,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pandas as pd
 import pytest
 from gymnasium import spaces
 from stable_baselines3 import TD3
@@ -18,7 +19,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 from benchmarks import run as runner
 from benchmarks import stats as st
-from benchmarks import store, suites
+from benchmarks import store, suites, verdicts
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback
 from sb3_denfac.envs.facts import env_facts
 
@@ -192,6 +193,31 @@ def test_verdict_rules():
     assert st.verdict("equal", 0.51, 0.7) == "refuted" and st.verdict("better", np.nan, np.nan).startswith("inconclusive")
     assert st.combine(["held", "held"]) == "held" and st.combine(["held", "refuted"]) == "refuted"
     assert st.combine(["held", "inconclusive"]) == "inconclusive"
+
+
+def test_paper_claims_with_missing_algorithms(monkeypatch):
+    """A claim of the paper stays in the verdict table while some of its algorithms have no runs on an env: decided on
+    the comparisons that have runs and marked "so far", refuted by any of them, "pending" where none has runs."""
+    monkeypatch.setattr(st, "REPS", 200)
+    level = {"denfac": -300.0, "nfac": -100.0, "cmaes": -900.0, "cacla": -800.0}  # CartPole returns: higher is better
+    runs = pd.DataFrame(
+        [
+            {"algo": a, "env": "cartpole", "seed": s, "final_best": v + 10 * s, "last10": v + 10 * s}
+            for a, v in level.items()
+            for s in range(5)
+        ]
+    )
+    table = verdicts.verdict_table(runs).set_index("claim")
+    ddpg = "no runs of DDPG (paper's)"
+    assert table.loc["DENFAC more data-efficient than DDPG", "verdict (final_best)"] == f"pending: {ddpg}"
+    assert table.loc["DENFAC about equal to NFAC+", "verdict (final_best)"] == "refuted"  # nothing missing
+    # CMA-ES is below CACLA+: refuted whatever DDPG would add
+    assert table.loc["CACLA+ the least data-efficient", "verdict (last10)"] == "refuted"
+    assert table.loc["CMA-ES strong: better than the online DDPG and CACLA+", "verdict (last10)"] == "refuted"
+    runs.loc[runs["algo"] == "cmaes", ["final_best", "last10"]] += 400.0  # now above CACLA+
+    table = verdicts.verdict_table(runs).set_index("claim")
+    assert table.loc["CACLA+ the least data-efficient", "verdict (last10)"] == f"held so far; {ddpg}"
+    assert "P(CMA-ES > CACLA+)" in table.loc["CACLA+ the least data-efficient", "interval (last10)"]
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
