@@ -83,13 +83,15 @@ def iqm_table(runs: pd.DataFrame, envs: list[str], measure: str) -> pd.DataFrame
 
 
 def probability_of_improvement(
-    runs: pd.DataFrame, a: str, b: str, envs: list[str], measure: str
+    runs: pd.DataFrame, a: str, b: str, envs: list[str], measure: str, lower_is_better: bool | None = None
 ) -> tuple[float, float, float, int, int]:
-    """P(a > b) on ``measure`` averaged over ``envs`` (rliable), its interval, and the run counts of a and b."""
+    """P(a > b) on ``measure`` averaged over ``envs`` (rliable), its interval, and the run counts of a and b.
+
+    ``lower_is_better``: the measure's direction on every env (e.g. CPU seconds); None: the env's (``oriented``)."""
     from rliable import library as rly
     from rliable import metrics
 
-    values = oriented(runs, measure)
+    values = oriented(runs, measure) if lower_is_better is None else runs[measure] * (-1.0 if lower_is_better else 1.0)
     x, y = score_matrix(runs, a, envs, values), score_matrix(runs, b, envs, values)
     if x.shape[0] < 2 or y.shape[0] < 2:
         return np.nan, np.nan, np.nan, x.shape[0], y.shape[0]

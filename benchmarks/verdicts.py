@@ -20,8 +20,10 @@ def _label(algo: str) -> str:
     return ALGOS[algo].label if algo in ALGOS else algo
 
 
-def _compare(runs: pd.DataFrame, a: str, b: str, env: str, measure: str, kind: str) -> tuple[str, str]:
-    p, low, high, na, nb = st.probability_of_improvement(runs, a, b, [env], measure)
+def _compare(
+    runs: pd.DataFrame, a: str, b: str, env: str, measure: str, kind: str, lower_is_better: bool | None = None
+) -> tuple[str, str]:
+    p, low, high, na, nb = st.probability_of_improvement(runs, a, b, [env], measure, lower_is_better)
     text = (
         f"P({_label(a)} > {_label(b)}) = {p:.2f} [{low:.2f}, {high:.2f}], n = {na} vs {nb}"
         if na >= 2 and nb >= 2
@@ -30,18 +32,35 @@ def _compare(runs: pd.DataFrame, a: str, b: str, env: str, measure: str, kind: s
     return st.verdict(kind, low, high), text
 
 
+def _decide(results: list[tuple[str, str]], missing: list[str]) -> tuple[str, str]:
+    """The verdict and intervals of a claim from its comparisons' ``results``; ``missing``: algorithms of the claim
+    without runs on the env, whose comparisons are left out (the others' verdict is then given "so far", unless one
+    refutes it)."""
+    verdict = st.combine([v for v, _ in results]) if len(results) > 1 else results[0][0] if results else ""
+    if missing and verdict != "refuted":
+        labels = ", ".join(_label(a) for a in missing)
+        verdict = f"{verdict} so far; no runs of {labels}" if results else f"pending: no runs of {labels}"
+    return verdict, "; ".join(t for _, t in results)
+
+
 def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: list[str]) -> dict:
-    """One claim on one env from its comparisons ``parts``; ``missing``: algorithms of the claim without runs on the
-    env, whose comparisons are left out (the verdict of the others is then given "so far", unless one refutes it)."""
+    """One claim on one env from its comparisons ``parts``, on each measure of ``st.MEASURES``."""
     row = {"claim": claim, "env": env}
     for measure in st.MEASURES:
         results = [_compare(runs, a, b, env, measure, kind) for a, b, kind in parts]
-        verdict = st.combine([v for v, _ in results]) if len(results) > 1 else results[0][0] if results else ""
-        if missing and verdict != "refuted":
-            labels = ", ".join(_label(a) for a in missing)
-            verdict = f"{verdict} so far; no runs of {labels}" if results else f"pending: no runs of {labels}"
-        row[f"verdict ({measure})"] = verdict
-        row[f"interval ({measure})"] = "; ".join(t for _, t in results)
+        row[f"verdict ({measure})"], row[f"interval ({measure})"] = _decide(results, missing)
+    return row
+
+
+def _cpu_claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: list[str]) -> dict:
+    """A claim on computation: "A better than B" = A's CPU seconds per run (same episodes) lower than B's."""
+    results = [_compare(runs, a, b, env, "cpu_time", kind, lower_is_better=True) for a, b, kind in parts]
+    verdict, text = _decide(results, missing)
+    row = {"claim": claim, "env": env}
+    for measure in st.MEASURES:
+        first = measure == next(iter(st.MEASURES))
+        row[f"verdict ({measure})"] = verdict if first else "(CPU s per run only)"
+        row[f"interval ({measure})"] = f"on CPU s per run: {text}" if first and text else ""
     return row
 
 
@@ -73,7 +92,7 @@ def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
     have = set(zip(runs["algo"], runs["env"], strict=True))
     rows = []
 
-    def add(claim: str, env: str, parts: list[tuple[str, str, str]], partial: bool = False) -> None:
+    def add(claim: str, env: str, parts: list[tuple[str, str, str]], partial: bool = False, decide=_claim) -> None:
         """The claim's row if its algorithms all have runs on ``env``; with ``partial``, also from the comparisons
         that have runs, naming the algorithms that have none (a claim of the paper stays in the table)."""
         algos = list(dict.fromkeys(a for part in parts for a in part[:2]))
@@ -81,7 +100,7 @@ def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
         if missing and (not partial or len(missing) == len(algos)):
             return
         ready = [(a, b, kind) for a, b, kind in parts if a not in missing and b not in missing]
-        rows.append(_claim(runs, claim, env, ready, missing))
+        rows.append(decide(runs, claim, env, ready, missing))
 
     for env in PAPER_ENVS:
         add("DENFAC more data-efficient than DDPG", env, [("denfac", "ddpg", "better")], partial=True)
@@ -94,6 +113,8 @@ def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
         )
         others = [(x, "cacla", "better") for x in ("denfac", "nfac", "ddpg", "cmaes")]
         add("CACLA+ the least data-efficient", env, others, partial=True)
+        faster = [("cacla", x, "better") for x in ("denfac", "nfac", "ddpg", "cmaes")]
+        add("CACLA+ the fastest in computation", env, faster, partial=True, decide=_cpu_claim)
     for env in ("acrobot", "acrobot75"):
         goal = _cacla_goal(runs, env)
         if goal is not None:
@@ -114,4 +135,5 @@ excludes 0.5, **held** if it lies within [{st.EQUAL_MARGIN[0]}, {st.EQUAL_MARGIN
 made of several comparisons is refuted if one of them is, held if all are, otherwise inconclusive; where some of its
 algorithms have no runs on an env, it is decided on the comparisons that have them and marked "so far". Measures:
 {"; ".join(f"`{k}` = {v}" for k, v in st.MEASURES.items())} (of the exploring policy). The CACLA+ goal claim counts
-runs whose best-so-far reached the goal, with a Clopper-Pearson interval."""
+runs whose best-so-far reached the goal, with a Clopper-Pearson interval; "CACLA+ the fastest in computation" compares
+the CPU seconds per run (same episodes, lower is better)."""
