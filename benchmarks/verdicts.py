@@ -53,14 +53,16 @@ def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str,
 
 
 def _cpu_claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: list[str]) -> dict:
-    """A claim on computation: "A better than B" = A's CPU seconds per run (same episodes) lower than B's."""
-    results = [_compare(runs, a, b, env, "cpu_time", kind, lower_is_better=True) for a, b, kind in parts]
+    """A claim on computation: "A better than B" = A's CPU seconds per environment step lower than B's (per step, not
+    per run: where episodes end at a goal, a run that learns less takes more steps)."""
+    runs = runs.assign(cpu_per_step=runs["cpu_time"] / runs["timesteps"])
+    results = [_compare(runs, a, b, env, "cpu_per_step", kind, lower_is_better=True) for a, b, kind in parts]
     verdict, text = _decide(results, missing)
     row = {"claim": claim, "env": env}
     for measure in st.MEASURES:
         first = measure == next(iter(st.MEASURES))
-        row[f"verdict ({measure})"] = verdict if first else "(CPU s per run only)"
-        row[f"interval ({measure})"] = f"on CPU s per run: {text}" if first and text else ""
+        row[f"verdict ({measure})"] = verdict if first else "(CPU per step only)"
+        row[f"interval ({measure})"] = text.replace(" > ", " cheaper than ") if first else ""
     return row
 
 
@@ -93,8 +95,8 @@ def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
     rows = []
 
     def add(claim: str, env: str, parts: list[tuple[str, str, str]], partial: bool = False, decide=_claim) -> None:
-        """The claim's row if its algorithms all have runs on ``env``; with ``partial``, also from the comparisons
-        that have runs, naming the algorithms that have none (a claim of the paper stays in the table)."""
+        """The claim's row if its algorithms all have runs on ``env``; with ``partial``, also if some of them do,
+        from the comparisons that have runs, naming the algorithms that have none (left out if none has runs)."""
         algos = list(dict.fromkeys(a for part in parts for a in part[:2]))
         missing = [a for a in algos if (a, env) not in have]
         if missing and (not partial or len(missing) == len(algos)):
@@ -132,8 +134,9 @@ Mann-Whitney probability that a run of A beats a run of B, ties counting half) o
 its 95% stratified-bootstrap interval [low, high] ({st.REPS} resamples). "A more data-efficient than B": **held** if
 low > 0.5, **refuted** if high < 0.5, otherwise **inconclusive**. "A about equal to B": **refuted** if the interval
 excludes 0.5, **held** if it lies within [{st.EQUAL_MARGIN[0]}, {st.EQUAL_MARGIN[1]}], otherwise inconclusive. A claim
-made of several comparisons is refuted if one of them is, held if all are, otherwise inconclusive; where some of its
-algorithms have no runs on an env, it is decided on the comparisons that have them and marked "so far". Measures:
+made of several comparisons is refuted if one of them is, held if all are, otherwise inconclusive; where some of a
+paper claim's algorithms have no runs on an env, it is decided on the comparisons that have them and marked "so far" (a
+refutation by one of them stands), "pending" where none of its comparisons has runs. Measures:
 {"; ".join(f"`{k}` = {v}" for k, v in st.MEASURES.items())} (of the exploring policy). The CACLA+ goal claim counts
 runs whose best-so-far reached the goal, with a Clopper-Pearson interval; "CACLA+ the fastest in computation" compares
-the CPU seconds per run (same episodes, lower is better)."""
+the CPU seconds per environment step (lower is better; P(A cheaper than B))."""
