@@ -32,8 +32,11 @@ def _seeded() -> Iterator[np.random.RandomState]:
         np.random.set_state(state)
 
 
-def oriented(runs: pd.DataFrame, measure: str) -> pd.Series:
-    """The measure with higher = better (negated on lower-is-better envs)."""
+def oriented(runs: pd.DataFrame, measure: str, lower_is_better: bool | None = None) -> pd.Series:
+    """The measure with higher = better: negated on lower-is-better envs, or everywhere if ``lower_is_better`` (a
+    measure whose direction is the same on every env, e.g. CPU seconds; None: the env's)."""
+    if lower_is_better is not None:
+        return runs[measure] * (-1.0 if lower_is_better else 1.0)
     sign = runs["env"].map(lambda e: -1.0 if env_facts(e).lower_is_better else 1.0)
     return runs[measure] * sign
 
@@ -85,13 +88,12 @@ def iqm_table(runs: pd.DataFrame, envs: list[str], measure: str) -> pd.DataFrame
 def probability_of_improvement(
     runs: pd.DataFrame, a: str, b: str, envs: list[str], measure: str, lower_is_better: bool | None = None
 ) -> tuple[float, float, float, int, int]:
-    """P(a > b) on ``measure`` averaged over ``envs`` (rliable), its interval, and the run counts of a and b.
-
-    ``lower_is_better``: the measure's direction on every env (e.g. CPU seconds); None: the env's (``oriented``)."""
+    """P(a > b) on ``measure`` (oriented by ``oriented(runs, measure, lower_is_better)``) averaged over ``envs``
+    (rliable), its interval, and the run counts of a and b."""
     from rliable import library as rly
     from rliable import metrics
 
-    values = oriented(runs, measure) if lower_is_better is None else runs[measure] * (-1.0 if lower_is_better else 1.0)
+    values = oriented(runs, measure, lower_is_better)
     x, y = score_matrix(runs, a, envs, values), score_matrix(runs, b, envs, values)
     if x.shape[0] < 2 or y.shape[0] < 2:
         return np.nan, np.nan, np.nan, x.shape[0], y.shape[0]

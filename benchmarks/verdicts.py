@@ -21,11 +21,19 @@ def _label(algo: str) -> str:
 
 
 def _compare(
-    runs: pd.DataFrame, a: str, b: str, env: str, measure: str, kind: str, lower_is_better: bool | None = None
+    runs: pd.DataFrame,
+    a: str,
+    b: str,
+    env: str,
+    measure: str,
+    kind: str,
+    lower_is_better: bool | None = None,
+    relation: str = ">",
 ) -> tuple[str, str]:
+    """The verdict of "a ``kind`` b" on one env and its text, P(a ``relation`` b) = p [low, high]."""
     p, low, high, na, nb = st.probability_of_improvement(runs, a, b, [env], measure, lower_is_better)
     text = (
-        f"P({_label(a)} > {_label(b)}) = {p:.2f} [{low:.2f}, {high:.2f}], n = {na} vs {nb}"
+        f"P({_label(a)} {relation} {_label(b)}) = {p:.2f} [{low:.2f}, {high:.2f}], n = {na} vs {nb}"
         if na >= 2 and nb >= 2
         else (f"n = {na} vs {nb} runs")
     )
@@ -56,13 +64,20 @@ def _cpu_claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, 
     """A claim on computation: "A better than B" = A's CPU seconds per environment step lower than B's (per step, not
     per run: where episodes end at a goal, a run that learns less takes more steps)."""
     runs = runs.assign(cpu_per_step=runs["cpu_time"] / runs["timesteps"])
-    results = [_compare(runs, a, b, env, "cpu_per_step", kind, lower_is_better=True) for a, b, kind in parts]
-    verdict, text = _decide(results, missing)
+    results = [
+        _compare(runs, a, b, env, "cpu_per_step", kind, lower_is_better=True, relation="cheaper than") for a, b, kind in parts
+    ]
+    return _first_measure_row(claim, env, *_decide(results, missing), "(CPU per step only)")
+
+
+def _first_measure_row(claim: str, env: str, verdict: str, text: str, elsewhere: str) -> dict[str, str]:
+    """A claim decided on one measure only: its verdict and text in the columns of the first of ``st.MEASURES``
+    (the best-so-far), ``elsewhere`` in the other verdict columns."""
+    first = next(iter(st.MEASURES))
     row = {"claim": claim, "env": env}
     for measure in st.MEASURES:
-        first = measure == next(iter(st.MEASURES))
-        row[f"verdict ({measure})"] = verdict if first else "(CPU per step only)"
-        row[f"interval ({measure})"] = text.replace(" > ", " cheaper than ") if first else ""
+        row[f"verdict ({measure})"] = verdict if measure == first else elsewhere
+        row[f"interval ({measure})"] = text if measure == first else ""
     return row
 
 
@@ -81,11 +96,7 @@ def _cacla_goal(runs: pd.DataFrame, env: str) -> dict[str, str] | None:
         else "inconclusive (too few runs)"
     )
     text = f"{reached}/{n} runs reached the goal within {budget} episodes; fraction 95% CI [{low:.2f}, {high:.2f}]"
-    row = {"claim": "CACLA+ cannot reach the Acrobot goal", "env": env}
-    for measure in st.MEASURES:
-        row[f"verdict ({measure})"] = v if measure == "final_best" else "(best-so-far only)"
-        row[f"interval ({measure})"] = text if measure == "final_best" else ""
-    return row
+    return _first_measure_row("CACLA+ cannot reach the Acrobot goal", env, v, text, "(best-so-far only)")
 
 
 def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
