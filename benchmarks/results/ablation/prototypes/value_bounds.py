@@ -1,0 +1,47 @@
+"""Prototype, not in the library (ablation README, section 16): eq. (4)'s bootstrap value kept inside the range that
+the observed rewards allow.
+
+The critic diagnostics of the 0.5 default (``benchmarks/diagnostics.py``, suite ``diagnosis``) show its values leaving
+that range: on Hopper-v5 mean Q over D grows from 857 at episode 10 to 2e8 at episode 90 (returns of the order of 100),
+on the paper's CartPole, whose rewards are all <= 0, mean Q is positive (up to 138). No discounted return of rewards in
+[r_min, r_max] leaves [r_min / (1 - gamma), r_max / (1 - gamma)], so the targets here are
+y = r + gamma (1 - d) clip(Q_bar(s', a'), r_min / (1 - gamma), r_max / (1 - gamma)), with r_min and r_max the smallest
+and largest reward in D at this update (no env knowledge; the range widens as new rewards are seen). Everything else is
+0.5's default. Runs ``benchmarks.run`` in this process with the patch (use ``--workers 0``); ``value_bounds/`` holds
+its runs.
+
+Usage: ``python value_bounds.py --algos abl:default05 --envs cartpole --seeds 0 1 2 --workers 0
+--results benchmarks/results/ablation/prototypes/value_bounds``
+"""
+
+import sys
+
+import torch as th
+
+from benchmarks import run
+from sb3_denfac.denfac.denfac import DENFAC
+
+_make_updater = DENFAC._make_updater
+
+
+class BoundedCritic:
+    """``updater.critic`` (used by DENFAC's update for eq. (4)'s bootstrap value only) clamped to [low, high]."""
+
+    def __init__(self, critic, low: float, high: float):
+        self.critic, self.low, self.high = critic, low, high
+
+    def __call__(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        return self.critic(obs, actions).clamp(self.low, self.high)
+
+
+def make_updater(self):
+    updater = _make_updater(self)
+    rewards = self.replay_buffer.rewards[: self.replay_buffer.size()]
+    scale = 1.0 / (1.0 - self.gamma)
+    updater.critic = BoundedCritic(updater.critic, float(rewards.min()) * scale, float(rewards.max()) * scale)
+    return updater
+
+
+if __name__ == "__main__":
+    DENFAC._make_updater = make_updater
+    sys.exit(run.main(sys.argv[1:]))
