@@ -2,13 +2,14 @@
 the observed rewards allow.
 
 The critic diagnostics of the 0.5 default (``benchmarks/diagnostics.py``, suite ``diagnosis``) show its values leaving
-that range: on Hopper-v5 mean Q over D grows from 857 at episode 10 to 2e8 at episode 90 (returns of the order of 100),
+that range: on Hopper-v5 mean Q over D grows from 857 at episode 10 to 2e8 at episode 90 (discounted returns below 100),
 on the paper's CartPole, whose rewards are all <= 0, mean Q is positive (up to 138). No discounted return of rewards in
 [r_min, r_max] leaves [r_min / (1 - gamma), r_max / (1 - gamma)], so the targets here are
 y = r + gamma (1 - d) clip(Q_bar(s', a'), r_min / (1 - gamma), r_max / (1 - gamma)), with r_min and r_max the smallest
-and largest reward in D at this update (no env knowledge; the range widens as new rewards are seen). Everything else is
-0.5's default. Runs ``benchmarks.run`` in this process with the patch (use ``--workers 0``); ``value_bounds/`` holds
-its runs.
+and largest reward in D at this update (no env knowledge; the range widens as new rewards are seen). They are read
+from the buffer's raw rewards, so with VecNormalize's reward scaling (no run here uses it) the bounds would have to come
+from the normalised rewards the update fits instead. Everything else is 0.5's default. Runs ``benchmarks.run`` in this
+process with the patch (use ``--workers 0``); ``value_bounds/`` holds its runs.
 
 Usage: ``python value_bounds.py --algos abl:default05 --envs cartpole --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/value_bounds``
