@@ -27,13 +27,23 @@ from sb3_denfac.envs.facts import env_facts
 RUN_FIELDS = [
     *("algo", "env", "seed", "episodes", "timesteps", "cpu_time", "eval_cpu_time", "wall_time", "final_best", "last10"),
     *("final_eval", "episodes_to_threshold", "fall_back", "cpu_per_episode", "gradient_steps", "trained"),
+    "last10_beyond_survival",
     *("hyperparams_source", "commit"),
 ]
 #: The rows of the user's answer (suite ``matched``): DENFAC's default against SAC at each schedule.
 ANSWER_ALGOS = ("denfac_default", "denfac_default04", "sac", "sac_matched", "td3_matched")
 #: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
-#: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes
+#: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes; its 1000 is "survives about the whole episode"
+#: (standing still for 1000 steps earns 1000 of survival bonus), so its cells also give the return beyond that bonus.
 ANSWER_LEVELS = {"halfcheetah": 1000.0, "hopper": 1000.0}
+
+
+def beyond_survival(returns: pd.Series, lengths: pd.Series, survival_bonus: float | None) -> pd.Series:
+    """The part of each episode's return earned beyond the env's survival bonus (``EnvFacts.survival_bonus`` per
+    step): return - bonus x length; NaN where the env pays no such bonus."""
+    if survival_bonus is None:
+        return pd.Series(np.nan, index=returns.index)
+    return returns.astype(float) - survival_bonus * lengths.astype(float)
 
 
 def _learning_starts(meta: dict) -> int:
@@ -66,6 +76,11 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "episodes": len(eps),
                 "final_best": float(eps["best_so_far"].iloc[-1]) if len(eps) else np.nan,
                 "last10": float(eps["performance"].tail(10).mean()),
+                "last10_beyond_survival": float(
+                    beyond_survival(eps["return"], eps["length"], facts.survival_bonus).tail(10).mean()
+                )
+                if {"return", "length"} <= set(eps)
+                else np.nan,
                 "final_eval": float(np.mean(evaluations[-1]["scores"])) if evaluations else np.nan,
                 "episodes_to_threshold": float(hits.iloc[0]) if len(hits) else np.nan,
                 "fall_back": fall_back_fraction(
@@ -129,6 +144,11 @@ def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
                 if facts.threshold is not None
                 else "",
                 "fall-back fraction": _quartiles(r["fall_back"], 2) if facts.threshold is not None else "",
+                **(
+                    {"last-10 beyond the survival bonus": _quartiles(r["last10_beyond_survival"])}
+                    if facts.survival_bonus is not None
+                    else {}
+                ),
                 "CPU s per run": _quartiles(r["cpu_time"], 0),
                 "CPU s per episode": _quartiles(r["cpu_per_episode"], 2),
             }
@@ -168,6 +188,8 @@ def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str
             )
             fall_back = f"{r['fall_back'].median():.2f}" if r["fall_back"].notna().any() else "–"
             row[ALGOS[algo].label] = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
+            if facts.survival_bonus is not None:
+                row[ALGOS[algo].label] += f" ({r['last10_beyond_survival'].median():.4g} beyond the survival bonus)"
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -260,12 +282,17 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
             lines += [f"Threshold: best so far {op} {facts.threshold:g} ({facts.threshold_meaning}). Fall-back fraction: "
                       "of the episodes after the first that reached it, the share below half the best so far (halfway "
                       f"from {_worst(facts)}).", ""]  # fmt: skip
+        if facts.survival_bonus is not None:
+            lines += [f"Every step pays a survival bonus of {facts.survival_bonus:g}: standing still for the whole "
+                      "episode earns its length in return. \"Beyond the survival bonus\" = return - bonus x length, the "
+                      "part earned by the task itself (moving forward, less the control cost).", ""]  # fmt: skip
         lines += [_md(env_table(runs, env)), ""]
     if suite is not None and suite.name == "matched":
         lines += ["## The user's answer: to the threshold, and after it", "",
                   "Medians over the runs that reached the level (the env's threshold, or `analysis.ANSWER_LEVELS`) of "
                   "the episodes, env steps and CPU seconds (cumulative, at the end of that episode) it took (reached/"
-                  "runs); over all runs, the fall-back fraction after the threshold and the last-10 mean.", "",
+                  "runs); over all runs, the fall-back fraction after the threshold and the last-10 mean (where the "
+                  "env pays a survival bonus, also the last-10 mean beyond it).", "",
                   _md(answer_table(episodes, runs)), ""]  # fmt: skip
     lines += aggregates(runs, envs, out, stem)
     if suite is None or suite.name == "figure3":

@@ -40,18 +40,31 @@ def _compare(
     return st.verdict(kind, low, high), text
 
 
-def _decide(results: list[tuple[str, str]], missing: list[str]) -> tuple[str, str]:
+#: Fewest runs of an algorithm on an env for a comparison: rliable's interval needs two.
+MIN_RUNS = 2
+
+
+def _missing_text(missing: dict[str, int]) -> str:
+    """The text naming the algorithms with fewer than :data:`MIN_RUNS` runs, e.g. "no runs of A, B; 1 run of C"."""
+    parts = []
+    for n in sorted(set(missing.values())):
+        labels = ", ".join(_label(a) for a, k in missing.items() if k == n)
+        parts.append(f"no runs of {labels}" if n == 0 else f"{n} run{'s' * (n > 1)} of {labels}")
+    return "; ".join(parts)
+
+
+def _decide(results: list[tuple[str, str]], missing: dict[str, int]) -> tuple[str, str]:
     """The verdict and intervals of a claim from its comparisons' ``results``; ``missing``: algorithms of the claim
-    without runs on the env, whose comparisons are left out (the others' verdict is then given "so far", unless one
-    refutes it)."""
+    with fewer than :data:`MIN_RUNS` runs on the env (and their counts), whose comparisons are left out (the others'
+    verdict is then given "so far", unless one refutes it)."""
     verdict = st.combine([v for v, _ in results]) if len(results) > 1 else results[0][0] if results else ""
     if missing and verdict != "refuted":
-        labels = ", ".join(_label(a) for a in missing)
-        verdict = f"{verdict} so far; no runs of {labels}" if results else f"pending: no runs of {labels}"
+        text = _missing_text(missing)
+        verdict = f"{verdict} so far; {text}" if results else f"pending: {text}"
     return verdict, "; ".join(t for _, t in results)
 
 
-def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: list[str]) -> dict:
+def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: dict[str, int]) -> dict:
     """One claim on one env from its comparisons ``parts``, on each measure of ``st.MEASURES``."""
     row = {"claim": claim, "env": env}
     for measure in st.MEASURES:
@@ -60,7 +73,7 @@ def _claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str,
     return row
 
 
-def _cpu_claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: list[str]) -> dict:
+def _cpu_claim(runs: pd.DataFrame, claim: str, env: str, parts: list[tuple[str, str, str]], missing: dict[str, int]) -> dict:
     """A claim on computation: "A better than B" = A's CPU seconds per environment step lower than B's (per step, not
     per run: where episodes end at a goal, a run that learns less takes more steps)."""
     runs = runs.assign(cpu_per_step=runs["cpu_time"] / runs["timesteps"])
@@ -102,14 +115,15 @@ def _cacla_goal(runs: pd.DataFrame, env: str) -> dict[str, str] | None:
 def verdict_table(runs: pd.DataFrame) -> pd.DataFrame:
     """All claims that the runs can speak to: the paper's claims on its envs as soon as one of their comparisons has
     runs (naming the algorithms still without runs), DENFAC against each peer on every env where both have runs."""
-    have = set(zip(runs["algo"], runs["env"], strict=True))
+    counts = runs.groupby(["algo", "env"]).size().to_dict()
     rows = []
 
     def add(claim: str, env: str, parts: list[tuple[str, str, str]], partial: bool = False, decide=_claim) -> None:
-        """The claim's row if its algorithms all have runs on ``env``; with ``partial``, also if some of them do,
-        from the comparisons that have runs, naming the algorithms that have none (left out if none has runs)."""
+        """The claim's row if its algorithms all have at least :data:`MIN_RUNS` runs on ``env``; with ``partial``,
+        also if some of them do, from the comparisons between those, naming the algorithms with fewer (left out if
+        none has enough)."""
         algos = list(dict.fromkeys(a for part in parts for a in part[:2]))
-        missing = [a for a in algos if (a, env) not in have]
+        missing = {a: counts.get((a, env), 0) for a in algos if counts.get((a, env), 0) < MIN_RUNS}
         if missing and (not partial or len(missing) == len(algos)):
             return
         ready = [(a, b, kind) for a, b, kind in parts if a not in missing and b not in missing]
@@ -146,8 +160,9 @@ its 95% stratified-bootstrap interval [low, high] ({st.REPS} resamples). "A more
 low > 0.5, **refuted** if high < 0.5, otherwise **inconclusive**. "A about equal to B": **refuted** if the interval
 excludes 0.5, **held** if it lies within [{st.EQUAL_MARGIN[0]}, {st.EQUAL_MARGIN[1]}], otherwise inconclusive. A claim
 made of several comparisons is refuted if one of them is, held if all are, otherwise inconclusive; where some of a
-paper claim's algorithms have no runs on an env, it is decided on the comparisons that have them and marked "so far" (a
-refutation by one of them stands), "pending" where none of its comparisons has runs. Measures:
+paper claim's algorithms have fewer than {MIN_RUNS} runs on an env (too few for an interval), it is decided on the
+comparisons between those that have them and marked "so far", naming the others' run counts (a refutation by one of
+them stands), "pending" where none of its comparisons has them; DENFAC against a peer needs {MIN_RUNS} runs of each. Measures:
 {"; ".join(f"`{k}` = {v}" for k, v in st.MEASURES.items())} (of the exploring policy). The CACLA+ goal claim counts
 runs whose best-so-far reached the goal, with a Clopper-Pearson interval; "CACLA+ the fastest in computation" compares
 the CPU seconds per environment step (lower is better; P(A cheaper than B))."""

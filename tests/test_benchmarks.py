@@ -228,11 +228,19 @@ def test_paper_claims_with_missing_algorithms(monkeypatch):
     runs.loc[runs["algo"] == "cmaes", "timesteps"] = 50  # CMA-ES: the same CPU over a tenth of the steps
     fastest = verdicts.verdict_table(runs).set_index("claim").loc["CACLA+ the fastest in computation"]
     assert fastest["verdict (final_best)"] == f"held so far; {ddpg}"
-    # one run is too few for an interval: inconclusive, and the claim is not held
+    # one run is too few for an interval: that algorithm counts as missing, with its count (adding a first run does
+    # not turn "held so far" into "inconclusive")
     table = verdicts.verdict_table(runs[(runs["algo"] != "nfac") | (runs["seed"] == 0)]).set_index("claim")
-    assert table.loc["DENFAC about equal to NFAC+", "verdict (final_best)"] == "inconclusive (too few runs)"
-    assert table.loc["CACLA+ the least data-efficient", "verdict (last10)"] == f"inconclusive so far; {ddpg}"
+    assert table.loc["DENFAC about equal to NFAC+", "verdict (final_best)"] == "pending: 1 run of NFAC+"
+    least = table.loc["CACLA+ the least data-efficient"]
+    assert least["verdict (last10)"] == f"held so far; {ddpg}; 1 run of NFAC+"
+    assert "NFAC+" not in least["interval (last10)"] and "P(CMA-ES > CACLA+)" in least["interval (last10)"]
     assert set(table["env"]) == {"cartpole"}  # no row where no algorithm has runs
+    # a peer comparison needs two runs of each
+    peers = pd.concat([runs, runs[runs["algo"] == "denfac"].assign(algo="sac").head(1)])
+    assert not verdicts.verdict_table(peers)["claim"].str.contains("SAC").any()
+    peers = pd.concat([runs, runs[runs["algo"] == "denfac"].assign(algo="sac").head(2)])
+    assert verdicts.verdict_table(peers)["claim"].str.contains("SAC").any()
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -436,3 +444,31 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
     assert row["level"] == ">= 1000"
     assert row[ALGOS["sac_matched"].label].startswith("2 ep, 200 steps, 20 CPU s (1/2); fall-back 0.00")
     assert row[ALGOS["denfac_default"].label] == "–"
+
+
+def test_survival_bonus_separates_standing_from_moving(tmp_path):
+    """On an env that pays a survival bonus (Hopper), a run that stands still for the whole episode and one that moves
+    forward and falls can have the same return; the reports give the part beyond the bonus, which tells them apart."""
+    from benchmarks import analysis, store
+    from benchmarks.suites import ALGOS
+
+    def record(algo, returns, lengths):
+        n, clock = len(returns), [float(i) for i in range(1, len(returns) + 1)]
+        best, steps = np.maximum.accumulate(returns).tolist(), np.cumsum(lengths).tolist()
+        episodes = {"episode": list(range(1, n + 1)), "performance": returns, "best_so_far": best, "return": returns,
+                    "length": lengths, "timesteps": steps, "cpu_time": clock, "wall_time": clock}  # fmt: skip
+        return {"algo": algo, "env": "hopper", "seed": 0, "episodes_requested": n, "status": "done",
+                "timesteps": int(sum(lengths)), "cpu_time": float(n), "episodes": episodes}  # fmt: skip
+
+    standing = record("denfac_default", [1000.0] * 12, [1000] * 12)  # the healthy reward only
+    hopping = record("sac_matched", [300.0] * 2 + [1000.0] * 10, [100] * 2 + [400] * 10)  # 600 beyond the bonus
+    store.write_records(tmp_path, [standing, hopping])
+    episodes, runs = analysis.load(tmp_path)
+    beyond = runs.set_index("algo")["last10_beyond_survival"]
+    assert beyond["denfac_default"] == 0.0 and beyond["sac_matched"] == 600.0
+    assert runs.set_index("algo")["last10"].nunique() == 1  # the return alone cannot tell them apart
+    table = analysis.env_table(runs, "hopper").set_index("algo")
+    assert table.loc[ALGOS["sac_matched"].label, "last-10 beyond the survival bonus"].startswith("600.0")
+    assert "last-10 beyond the survival bonus" not in analysis.env_table(runs.assign(env="reacher"), "reacher")
+    cell = analysis.answer_table(episodes, runs, algos=("denfac_default",)).set_index("env").loc["hopper"]
+    assert cell[ALGOS["denfac_default"].label].endswith("last-10 1000 (0 beyond the survival bonus)")

@@ -25,6 +25,9 @@ class EnvFacts:
     :param score_range: (worst, best) reference values of the measure, for normalising scores to [0, 1] across envs;
         ``None``: no fixed reference (normalise over the runs compared).
     :param label: a short human-readable title.
+    :param survival_bonus: the reward every step pays for not having terminated (Gymnasium's ``healthy_reward`` of
+        the MuJoCo locomotion envs), ``None`` if none. The return then mixes surviving and the task: standing still
+        for the whole episode earns ``survival_bonus`` x its length, so the reports also give the return beyond it.
     """
 
     name: str
@@ -36,6 +39,7 @@ class EnvFacts:
     threshold_meaning: str = ""
     score_range: tuple[float, float] | None = None
     label: str = ""
+    survival_bonus: float | None = None
 
     def reached(self, value: float) -> bool:
         """Whether ``value`` of the measure reaches the threshold (False without a threshold or for NaN)."""
@@ -118,6 +122,7 @@ ENV_FACTS: dict[str, EnvFacts] = {
             threshold=3800.0,
             threshold_meaning="Gymnasium's reward_threshold",
             label="Hopper-v5 (return, higher is better)",
+            survival_bonus=1.0,
         ),
         EnvFacts(
             "reacher",
