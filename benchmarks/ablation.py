@@ -155,6 +155,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # Pendulum, where the matched SAC first holds the pendulum up at episode 10 and 0.5's default at 18: SAC's wider
     # early exploration (its entropy term; SB3's 100 uniform warm-up steps) in DENFAC's terms
     c["default05+warmup200"] = merge(c["default05"], dict(learning_starts=200))
+    # eq. (4)'s bootstrap value clipped to the rewards' range (the library's ``bootstrap_bounds``; section 17)
+    c["default05+bounds"] = merge(c["default05"], dict(bootstrap_bounds=True))
     return c
 
 

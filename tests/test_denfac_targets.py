@@ -1,6 +1,7 @@
-"""DENFAC's target options of eq. (4): ``critic_target`` (how the Q networks make the bootstrap value) and
-``target_policy_noise`` / ``target_noise_clip`` (TD3's target policy smoothing of the next action); both updaters,
-validation, save/load, and files of earlier versions."""
+"""DENFAC's target options of eq. (4): ``critic_target`` (how the Q networks make the bootstrap value),
+``target_policy_noise`` / ``target_noise_clip`` (TD3's target policy smoothing of the next action) and
+``bootstrap_bounds`` (the bootstrap value clipped to what the rewards allow); both updaters, validation, save/load, and
+files of earlier versions."""
 
 from __future__ import annotations
 
@@ -89,6 +90,8 @@ def test_defaults_and_no_target_noise_is_the_deterministic_next_action(target_ac
         (dict(critic_target="max"), "critic_target must be one of"),
         (dict(target_policy_noise=-0.1), "target_policy_noise"),
         (dict(target_noise_clip=-1), "target_noise_clip"),
+        (dict(bootstrap_bounds=1), "bootstrap_bounds must be True or False"),
+        (dict(bootstrap_bounds="False"), "bootstrap_bounds must be True or False"),
     ],
 )
 def test_invalid_target_options(target_action_env, kwargs, message):
@@ -154,6 +157,61 @@ def test_files_of_earlier_versions_get_the_target_settings_they_ran_with():
 
     from sb3_denfac.common.compat import denfac_attributes_of_old_files
 
-    model = SimpleNamespace(critic_target="mean", target_policy_noise=0.2, target_noise_clip=0.1)
+    model = SimpleNamespace(critic_target="mean", target_policy_noise=0.2, target_noise_clip=0.1, bootstrap_bounds=True)
     denfac_attributes_of_old_files(model)
     assert (model.critic_target, model.target_policy_noise, model.target_noise_clip) == ("min", 0.0, 0.5)
+    assert model.bootstrap_bounds is False
+
+
+def test_bootstrap_range():
+    """The range of every discounted return of at least one reward in [r_min, r_max] (gamma 0.9: 1 / (1 - gamma) = 10)."""
+    from sb3_denfac.denfac.options import bootstrap_range
+
+    assert bootstrap_range(th.tensor([[-2.0], [3.0]]), 0.9) == pytest.approx((-20.0, 30.0))  # both signs: the sums
+    assert bootstrap_range(th.tensor([[1.0], [1.0]]), 0.9) == pytest.approx((1.0, 10.0))  # +1 per step, can end at once
+    assert bootstrap_range(th.tensor([[-3.0], [-0.5]]), 0.9) == pytest.approx((-30.0, -0.5))
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_bootstrap_bounds_clip_a_diverged_critic(target_action_env, update_path):
+    """With ``bootstrap_bounds``, q = r + gamma (1 - d) clip(Q(s', a'), low, high): a critic whose values have left the
+    rewards' range (its output bias set to 1e6) gives targets inside it; without, the same critic's targets are not."""
+    from sb3_denfac.denfac.options import bootstrap_range
+
+    targets = {}
+    for bounds in (False, True):
+        model = DENFAC("MlpPolicy", target_action_env(), bootstrap_bounds=bounds, update_path=update_path, **EXACT)
+        model.learn(30)
+        with th.no_grad():
+            for q_net in model.critic.q_networks:
+                q_net[-1].bias.fill_(1e6)
+        model._update()
+        data = model.replay_buffer.all_samples()
+        low, high = bootstrap_range(data.rewards, model.gamma)
+        targets[bounds] = model._last_update_stats["q_targets"]
+        bootstrap_max = data.rewards + model.gamma * (1.0 - data.dones) * high
+        assert high < 1e3 and (targets[bounds] <= bootstrap_max + 1e-4).all() == bounds
+    assert model.logger.name_to_value["train/bootstrap_clip_fraction"] == 1.0  # every value was clipped
+    assert (targets[True] >= data.rewards + model.gamma * (1.0 - data.dones) * low - 1e-4).all()
+
+
+def test_bootstrap_bounds_change_nothing_inside_the_range(target_action_env):
+    """Where every bootstrap value lies in the range, an update's targets with the bounds are those without (same
+    networks, same draws)."""
+    model = DENFAC("MlpPolicy", target_action_env(), **EXACT).learn(30)
+    state = copy.deepcopy(model.policy.state_dict())
+    targets = []
+    for bounds in (False, True):
+        model.policy.load_state_dict(state)
+        model.bootstrap_bounds = bounds
+        th.manual_seed(0)
+        model._update()
+        targets.append(model._last_update_stats["q_targets"])
+    assert model.logger.name_to_value["train/bootstrap_clip_fraction"] == 0.0
+    th.testing.assert_close(targets[0], targets[1])
+
+
+def test_save_load_keeps_bootstrap_bounds(tmp_path, target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), bootstrap_bounds=True, **SMALL)
+    model.save(tmp_path / "model.zip")
+    assert DENFAC.load(tmp_path / "model.zip", env=target_action_env()).bootstrap_bounds is True

@@ -31,6 +31,8 @@ TRAIN_KEYS: dict[str, str] = {
     "rows of q_target_mean",
     "train/importance_weight_min": "minimum of the truncated importance weights c_t over the rows of q_target_mean",
     "train/fitted_iterations": "K_e, fitted iterations run by the update (K unless update_to_data_ratio is set)",
+    "train/bootstrap_clip_fraction": "share of eq. (4)'s bootstrap values at the last fitted iteration that "
+    "bootstrap_bounds clipped to the rewards' range, over the rows of q_target_mean (0 without the bounds)",
     "train/actor_out_of_bounds": "fraction of the actor's raw outputs outside [-1, 1] (unbounded actor)",
     "train/cma_sigma": "CMA-ES's step size sigma after the generation",
     "train/best_return": "best candidate return seen so far",
@@ -57,6 +59,7 @@ WRITTEN_BY: dict[str, tuple[str, ...]] = {
         "train/importance_weight_mean",
         "train/importance_weight_min",
         "train/fitted_iterations",
+        "train/bootstrap_clip_fraction",
     ),
     "ddpg": (*_ACTOR_CRITIC, "train/q_target_mean", "train/actor_out_of_bounds"),
     "nfac": (*_ACTOR_CRITIC, "train/n_transitions", "train/update_time", "train/positive_td_fraction"),

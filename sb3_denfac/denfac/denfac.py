@@ -17,6 +17,7 @@ from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import (
     InputChecksMixin,
+    check_bool,
     check_choice,
     check_gamma,
     check_learning_rate,
@@ -36,7 +37,7 @@ from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
-from sb3_denfac.denfac.options import check_options, fitted_iterations
+from sb3_denfac.denfac.options import bootstrap_range, check_options, fitted_iterations
 from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
 from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
@@ -110,6 +111,8 @@ class DENFAC(
     :param target_noise_clip: the noise of ``target_policy_noise`` is clipped to +-this (TD3: 0.5)
     :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "mean" (default,
         their average) or "min" (clipped double Q, 0.4's default)
+    :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
+        (:mod:`~.options`; default False, paper: no bound)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -163,6 +166,7 @@ class DENFAC(
         target_policy_noise: float = 0.2,
         target_noise_clip: float = 0.5,
         critic_target: str = "mean",
+        bootstrap_bounds: bool = False,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -190,6 +194,7 @@ class DENFAC(
         self.target_policy_noise = check_number("target_policy_noise", target_policy_noise, minimum=0.0, note=" (0: off)")
         self.target_noise_clip = check_number("target_noise_clip", target_noise_clip, minimum=0.0)
         self.critic_target = check_choice("critic_target", critic_target, CRITIC_TARGETS)
+        self.bootstrap_bounds = check_bool("bootstrap_bounds", bootstrap_bounds)
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -305,6 +310,8 @@ class DENFAC(
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
         updater = self._make_updater()
+        bounds = bootstrap_range(rewards, self.gamma) if self.bootstrap_bounds else None
+        clipped = th.zeros(())
         critic_loss = actor_objective = th.zeros(())
         for _ in range(n_iterations):
             # With mini-batches, the iteration's batches are drawn first: q_k and c are then needed on their rows only
@@ -316,7 +323,11 @@ class DENFAC(
             )
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                q_targets = r + self.gamma * (1.0 - done) * updater.critic(o2, self._target_actions(updater, o2))
+                next_q = updater.critic(o2, self._target_actions(updater, o2))
+                if bounds is not None:
+                    clipped = ((next_q < bounds[0]) | (next_q > bounds[1])).float().mean()
+                    next_q = next_q.clamp(*bounds)
+                q_targets = r + self.gamma * (1.0 - done) * next_q
                 weights = self._importance_weights(updater, o, o2, a, lp_b)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
@@ -336,6 +347,7 @@ class DENFAC(
         self.logger.record("train/critic_loss", float(critic_loss))
         self.logger.record("train/actor_loss", -float(actor_objective))
         self.logger.record("train/q_target_mean", q_targets.mean().item())
+        self.logger.record("train/bootstrap_clip_fraction", clipped.item())
         self.logger.record("train/n_transitions", obs.shape[0])  # |D|
         self.logger.record("train/update_time", time.perf_counter() - start)
         self.logger.record("train/importance_weight_mean", weights.mean().item())

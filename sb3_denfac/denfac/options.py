@@ -37,6 +37,21 @@ a short episode. With rho, the update after an episode (rollout) of n steps (SB3
     K_e = min(K, ceil(rho n / critic_steps))   fitted iterations,
 
 i.e. about rho critic steps per collected step, never more than Algorithm 1's K iterations.
+
+**Bootstrap bounds** (``bootstrap_bounds``, off by default). No discounted return of at least one reward in
+[r_min, r_max] leaves
+
+    [min(r_min, r_min / (1 - gamma)),  max(r_max, r_max / (1 - gamma))]
+
+(one step's reward where an episode can end at once, the infinite sum where it cannot). With r_min, r_max the smallest
+and largest reward in D at the update (the rewards eq. (4) fits, after any VecNormalize scaling: no env knowledge, and
+the range widens as new rewards come), the bootstrap value of eq. (4) is clipped to it:
+
+    q_t = r_t + gamma (1 - d_t) clip(Q_{k-1}(s_{t+1}, a'), low, high),
+
+which stops a critic whose values leave what the rewards allow from feeding on itself (a critic of 64-64 networks
+fitted 500 steps per episode can grow tenfold every few episodes on a task with a survival bonus). Where the values stay
+inside, it changes nothing. ``train/bootstrap_clip_fraction`` logs the share of the bootstrap values it clipped.
 """
 
 from __future__ import annotations
@@ -111,3 +126,9 @@ def proximal_actor_backward(
     loss = -(actions * (grad / scale)).sum(1).mean() + coef * (actions - old_actions).pow(2).sum(1).mean()
     loss.backward()
     return q_values.detach().mean()
+
+
+def bootstrap_range(rewards: th.Tensor, gamma: float) -> tuple[float, float]:
+    """(low, high) of the bootstrap bounds (module docstring) from the rewards of D."""
+    r_min, r_max, scale = float(rewards.min()), float(rewards.max()), 1.0 / (1.0 - gamma)
+    return min(r_min, r_min * scale), max(r_max, r_max * scale)

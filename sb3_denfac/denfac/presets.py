@@ -33,6 +33,7 @@ PAPER: dict[str, Any] = {
     "weighting": "retrace",
     "actor_proximal": 0.0,
     "target_policy_noise": 0.0,
+    "bootstrap_bounds": False,
     "sigma": 0.05,
     "policy_kwargs": {"net_arch": {"pi": [20], "qf": [50, 7]}, "batch_norm": True, "init": "paper", "n_critics": 1},
 }

@@ -10,7 +10,8 @@ mini-batch size, tau, additional updates, K, G, D, reset critic) plus the explor
 DENFAC's also offers the stability options of its default configuration (``actor_proximal`` lambda, 0 = the
 paper's plain ascent of eq. (5); ``n_critics``, 1 = the paper's single critic in the targets of eq. (4);
 ``critic_target``, the critics' mean or minimum in those targets; ``target_policy_noise``, 0 = the paper's
-deterministic next action pi(s')), since none is right everywhere: the minimum over critics also lowers the value of a
+deterministic next action pi(s'); ``bootstrap_bounds``, False = the paper's unbounded bootstrap value), since none is
+right everywhere: the minimum over critics also lowers the value of a
 sparse reward.
 gamma is not tuned: the paper fixes it per environment (it stays as in the YAML entry). None of these samplers sets
 ``train_freq``: DENFAC, NFAC and CMA-ES update per episode and the zoo's TD3 sampler would override that.
@@ -76,8 +77,9 @@ def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
 
 def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes, the
-    proximal actor's lambda, the number of critics, and how eq. (4)'s targets combine them (``critic_target``) and
-    smooth the next action (``target_policy_noise``; 0 = the paper's pi(s'))."""
+    proximal actor's lambda, the number of critics, and how eq. (4)'s targets combine them (``critic_target``), smooth
+    the next action (``target_policy_noise``; 0 = the paper's pi(s')) and bound the bootstrap value
+    (``bootstrap_bounds``)."""
     params = {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
@@ -94,6 +96,7 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "n_critics": trial.suggest_categorical("n_critics", [1, 2]),
         "critic_target": trial.suggest_categorical("critic_target", ["mean", "min"]),
         "target_policy_noise": trial.suggest_categorical("target_policy_noise", [0.0, 0.1, 0.2, 0.3]),
+        "bootstrap_bounds": trial.suggest_categorical("bootstrap_bounds", [False, True]),
     }
     return _sampled(trial, convert_denfac_params(params))
 

@@ -3,12 +3,13 @@ the observed rewards allow.
 
 The critic diagnostics of the 0.5 default (``benchmarks/diagnostics.py``, suite ``diagnosis``) show its values leaving
 that range: on Hopper-v5 mean Q over D grows from 857 at episode 10 to 2e8 at episode 90 (discounted returns below 100),
-on the paper's CartPole, whose rewards are all <= 0, mean Q is positive (up to 138). No discounted return of rewards in
-[r_min, r_max] leaves [r_min / (1 - gamma), r_max / (1 - gamma)], so the targets here are
-y = r + gamma (1 - d) clip(Q_bar(s', a'), r_min / (1 - gamma), r_max / (1 - gamma)), with r_min and r_max the smallest
-and largest reward in D at this update (no env knowledge; the range widens as new rewards are seen). They are read
-from the buffer's raw rewards, so with VecNormalize's reward scaling (no run here uses it) the bounds would have to come
-from the normalised rewards the update fits instead. Everything else is 0.5's default. Runs ``benchmarks.run`` in this
+on the paper's CartPole, whose rewards are all <= 0, mean Q is positive (up to 138). No discounted return of at least
+one reward in [r_min, r_max] leaves [min(r_min, r_min / (1 - gamma)), max(r_max, r_max / (1 - gamma))] (one step's
+reward where an episode can end at once, the infinite sum where it cannot), so the targets here are
+y = r + gamma (1 - d) clip(Q_bar(s', a'), low, high) with those bounds, r_min and r_max the smallest and largest reward
+in D at this update (no env knowledge; the range widens as new rewards are seen). They are read from the buffer's raw
+rewards, so with VecNormalize's reward scaling (no run here uses it) the bounds would have to come from the normalised
+rewards the update fits instead. Everything else is 0.5's default. Runs ``benchmarks.run`` in this
 process with the patch (use ``--workers 0``); ``value_bounds/`` holds its runs.
 
 Usage: ``python value_bounds.py --algos abl:default05 --envs cartpole --seeds 0 1 2 --workers 0
@@ -35,11 +36,19 @@ class BoundedCritic:
         return self.critic(obs, actions).clamp(self.low, self.high)
 
 
+def value_range(r_min: float, r_max: float, gamma: float) -> tuple[float, float]:
+    """The range of every discounted return of at least one reward in [r_min, r_max], ended or not: one step's reward
+    where the episode can end at once, the infinite sum's r / (1 - gamma) where it cannot. (The runs before this form,
+    ``r_min / (1 - gamma), r_max / (1 - gamma)``, differ only where all rewards have one sign: InvertedPendulum's, all
+    +1, clamped every bootstrap value to 100; Pendulum's, all < 0; those runs are in ``value_bounds/infinite_sum/``.)"""
+    scale = 1.0 / (1.0 - gamma)
+    return min(r_min, r_min * scale), max(r_max, r_max * scale)
+
+
 def make_updater(self):
     updater = _make_updater(self)
     rewards = self.replay_buffer.rewards[: self.replay_buffer.size()]
-    scale = 1.0 / (1.0 - self.gamma)
-    updater.critic = BoundedCritic(updater.critic, float(rewards.min()) * scale, float(rewards.max()) * scale)
+    updater.critic = BoundedCritic(updater.critic, *value_range(float(rewards.min()), float(rewards.max()), self.gamma))
     return updater
 
 
