@@ -78,3 +78,16 @@ def test_acrobot_horizon(tmp_path):
     acrobot_horizon.main(["--restarts", "1", "--generations", "2", "--switches", "1", "--stride", "25",
                           "--output", str(tmp_path)])  # fmt: skip
     assert "steps to goal" in (tmp_path / "acrobot_horizon.md").read_text()
+
+
+def test_long_hopper_record_script():
+    """``benchmarks/results/ablation/long_hopper/run.py`` (section 17's longer Hopper runs) prints its per-10-episode
+    rows; with ``--bounds`` the q targets stay within what the rewards allow (|q| < 1000 on Hopper's rewards)."""
+    script = REPO / "benchmarks/results/ablation/long_hopper/run.py"
+    result = subprocess.run(
+        [sys.executable, str(script), "0", "10", "--bounds"], cwd=REPO, capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
+    row = json.loads(result.stdout.strip().splitlines()[-1])
+    assert row["ep"] == 10 and row["len"] > 0 and abs(row["beyond"] - (row["ret"] - row["len"])) < 1e-6
+    assert abs(row["q"]) < 1000
