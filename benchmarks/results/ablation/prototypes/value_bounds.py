@@ -1,5 +1,5 @@
-"""Prototype, not in the library (ablation README, section 16): eq. (4)'s bootstrap value kept inside the range that
-the observed rewards allow.
+"""Prototype (ablation README, section 16), now the library option ``DENFAC(..., bootstrap_bounds=True)`` (section 17):
+eq. (4)'s bootstrap value kept inside the range that the observed rewards allow.
 
 The critic diagnostics of the 0.5 default (``benchmarks/diagnostics.py``, suite ``diagnosis``) show its values leaving
 that range: on Hopper-v5 mean Q over D grows from 857 at episode 10 to 2e8 at episode 90 (discounted returns below 100),
@@ -22,6 +22,7 @@ import torch as th
 
 from benchmarks import run
 from sb3_denfac.denfac.denfac import DENFAC
+from sb3_denfac.denfac.options import bootstrap_range
 
 _make_updater = DENFAC._make_updater
 
@@ -36,19 +37,15 @@ class BoundedCritic:
         return self.critic(obs, actions).clamp(self.low, self.high)
 
 
-def value_range(r_min: float, r_max: float, gamma: float) -> tuple[float, float]:
-    """The range of every discounted return of at least one reward in [r_min, r_max], ended or not: one step's reward
-    where the episode can end at once, the infinite sum's r / (1 - gamma) where it cannot. (The runs before this form,
-    ``r_min / (1 - gamma), r_max / (1 - gamma)``, differ only where all rewards have one sign: InvertedPendulum's, all
-    +1, clamped every bootstrap value to 100; Pendulum's, all < 0; those runs are in ``value_bounds/infinite_sum/``.)"""
-    scale = 1.0 / (1.0 - gamma)
-    return min(r_min, r_min * scale), max(r_max, r_max * scale)
-
-
 def make_updater(self):
+    """The updater with its bootstrap value clamped to :func:`~sb3_denfac.denfac.options.bootstrap_range` of D's
+    rewards (the range the library's ``bootstrap_bounds=True`` now uses, and the same targets). The runs before that
+    form, with ``r_min / (1 - gamma), r_max / (1 - gamma)``, differ only where all rewards have one sign and episodes
+    can end (InvertedPendulum's +1 clamped every bootstrap value to 100) or all are < 0 (Pendulum): those runs are in
+    ``value_bounds/infinite_sum/``."""
     updater = _make_updater(self)
-    rewards = self.replay_buffer.rewards[: self.replay_buffer.size()]
-    updater.critic = BoundedCritic(updater.critic, *value_range(float(rewards.min()), float(rewards.max()), self.gamma))
+    rewards = th.as_tensor(self.replay_buffer.rewards[: self.replay_buffer.size()])
+    updater.critic = BoundedCritic(updater.critic, *bootstrap_range(rewards, self.gamma))
     return updater
 
 
