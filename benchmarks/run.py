@@ -134,6 +134,14 @@ def select_cells(
         if suite not in suites.SUITES:
             raise ValueError(f"unknown --suite {suite!r}; choose from {sorted(suites.SUITES)}")
         cells = suites.SUITES[suite].cells()
+        for flag, asked, position in (("--algos", algos, 0), ("--envs", envs, 1), ("--seeds", seeds, 2)):
+            outside = [v for v in asked or () if v not in {c[position] for c in cells}]
+            if outside:  # a silent "0 runs to do" hides the cause
+                choices = sorted({c[position] for c in cells}, key=str)
+                raise ValueError(
+                    f"{flag} {outside} not in suite {suite!r} (its {flag[2:]}: {choices}); leave out --suite to run "
+                    "any algos, envs and seeds (--diagnostics-every gives the suite's critic diagnostics)"
+                )
         return [
             (a, e, s)
             for a, e, s in cells
@@ -160,6 +168,7 @@ def sweep(
     zoo_logs: str | Path | None = None,
     analysis: bool = True,
     verbose: int = 1,
+    diagnostics_every: int | None = None,
 ) -> dict[str, list]:
     """Run the cells of :func:`select_cells` that ``results_dir`` does not hold yet; return ``{"done", "skipped",
     "failed"}`` lists of tasks.
@@ -167,11 +176,17 @@ def sweep(
     ``episodes``: one budget for all envs, ``{env: budget}``, or None for each env's budget (the suite's, else
     ``suites.BUDGETS``). ``results_dir``: None for the suite's study folder (:func:`default_results_dir`).
     ``zoo_logs``: a folder to also write the RL Zoo's ``evaluations.npz`` files to (None: none).
+    ``diagnostics_every``: record DENFAC's critic-fit diagnostics every that many episodes (0: none; None: the
+    suite's, else none).
     """
     cells = select_cells(suite, algos, envs, seeds)
     if isinstance(episodes, int):
         episodes = {e: episodes for _, e, _ in cells}
     the_suite = suites.SUITES.get(suite) if suite else None
+    if diagnostics_every is None:
+        diagnostics_every = the_suite.diagnostics_every if the_suite else 0
+    if isinstance(diagnostics_every, bool) or not isinstance(diagnostics_every, int) or diagnostics_every < 0:
+        raise ValueError(f"diagnostics_every must be an int >= 0 (0: none), got {diagnostics_every!r}")
     results_dir = Path(results_dir) if results_dir is not None else default_results_dir(suite)
     results_dir.mkdir(parents=True, exist_ok=True)
     if store.repair(results_dir) and verbose:
@@ -197,7 +212,7 @@ def sweep(
             "eval_every": budget.eval_every,
             "eval_episodes": budget.eval_episodes,
             "eval_kwargs": dict(budget.eval_kwargs),
-            "diagnostics_every": the_suite.diagnostics_every if the_suite else 0,
+            "diagnostics_every": diagnostics_every,
         }
         (status["skipped"] if (algo, env, int(seed), budget.episodes) in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
@@ -291,6 +306,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001', 'local')")
     parser.add_argument("--zoo-logs", default=None, help="also write the RL Zoo's evaluations.npz files under this folder")
     parser.add_argument("--no-analysis", action="store_true", help="skip the tables and plots at the end")
+    parser.add_argument(
+        "--diagnostics-every",
+        type=int,
+        default=None,
+        help="record DENFAC's critic-fit diagnostics every N episodes (0: none; default: the suite's, else none)",
+    )
     args = parser.parse_args(argv)
     status = sweep(
         args.algos,
@@ -304,6 +325,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ray_address=args.ray_address,
         zoo_logs=args.zoo_logs,
         analysis=not args.no_analysis,
+        diagnostics_every=args.diagnostics_every,
     )
     print(f"finished: {len(status['done'])} done, {len(status['skipped'])} skipped, {len(status['failed'])} failed")
     return 1 if status["failed"] else 0

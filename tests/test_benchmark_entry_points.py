@@ -55,6 +55,17 @@ def test_ablation_study_records_diagnostics_and_tables(tmp_path):
     assert (tmp_path / "runs.csv").read_text().count("(6 ep),pendulum,0,") == 2
 
 
+def test_diagnostics_outside_a_suite(tmp_path):
+    # any env, algos and seeds, with a suite's critic diagnostics: --diagnostics-every without --suite
+    args = ["--algos", "abl:default05", "--envs", "Pendulum-v1", "--seeds", "0", "--episodes", "3"]
+    assert runner.main([*args, "--diagnostics-every", "2", "--results", str(tmp_path), "--workers", "0",
+                        "--no-analysis"]) == 0  # fmt: skip
+    (record,) = store.read_runs(tmp_path)
+    assert [d["episode"] for d in record["diagnostics"]] == [2] and record["diagnostics"][0]["n"] == 2 * 200
+    with pytest.raises(ValueError, match="diagnostics_every must be an int >= 0"):
+        runner.sweep(["abl:default05"], ["Pendulum-v1"], [1], 1, results_dir=tmp_path, diagnostics_every=-1)
+
+
 def test_cost_measures_and_plans(tmp_path):
     cost.main(["--algos", "cmaes", "--envs", "pendulum", "--results", str(tmp_path), "--sweep", str(tmp_path / "none")])
     plan = (tmp_path / "sweep_plan.md").read_text()

@@ -123,6 +123,13 @@ def test_suites_and_cells():
         runner.select_cells("nope")
     with pytest.raises(ValueError, match="unknown --algos"):
         runner.select_cells(None, ["nope"], ["cartpole"], [0])
+    # a request the suite does not hold is named, not answered with "0 runs to do"
+    with pytest.raises(ValueError, match=r"--envs \['Walker2d-v5'\] not in suite 'ablation'.*leave out --suite"):
+        runner.select_cells("ablation", ["abl:default05"], ["hopper", "Walker2d-v5"])
+    with pytest.raises(ValueError, match=r"--algos \['sac'\] not in suite 'diagnosis'"):
+        runner.select_cells("diagnosis", ["sac"])
+    with pytest.raises(ValueError, match=r"--seeds \[3\] not in suite 'diagnosis'"):
+        runner.select_cells("diagnosis", seeds=[3])
     diagnosis = runner.select_cells("diagnosis")  # both ways: SAC's ingredients into DENFAC, DENFAC's into SAC
     assert len(diagnosis) == 8 * 4 * 3 and {"abl:default05", "sac_matched_frozen"} <= {a for a, _, _ in diagnosis}
     frozen = suites.load_hyperparams("sac_matched_frozen", "hopper")[0]
