@@ -477,5 +477,12 @@ def test_survival_bonus_separates_standing_from_moving(tmp_path):
     table = analysis.env_table(runs, "hopper").set_index("algo")
     assert table.loc[ALGOS["sac_matched"].label, "last-10 beyond the survival bonus"].startswith("600.0")
     assert "last-10 beyond the survival bonus" not in analysis.env_table(runs.assign(env="reacher"), "reacher")
-    cell = analysis.answer_table(episodes, runs, algos=("denfac_default",)).set_index("env").loc["hopper"]
+    answer = analysis.answer_table(episodes, runs, algos=("denfac_default", "sac_matched")).set_index("level")
+    assert list(answer["env"]) == ["hopper", "hopper"]  # the return's level, then the one beyond the bonus
+    cell = answer.loc[">= 1000"]
     assert cell[ALGOS["denfac_default"].label].endswith("last-10 1000 (0 beyond the survival bonus)")
+    moving = answer.loc["beyond the survival bonus >= 100"]
+    assert moving[ALGOS["denfac_default"].label] == "never (0/1); last-10 0"  # stood for every episode
+    # both reach a return of 1000 at episode 1 or 3; only the hopping run earns 100 beyond the bonus, at episode 1
+    assert cell[ALGOS["sac_matched"].label].startswith("3 ep, 600 steps, 3 CPU s (1/1)")
+    assert moving[ALGOS["sac_matched"].label] == "1 ep, 100 steps, 1 CPU s (1/1); last-10 600"
