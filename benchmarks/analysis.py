@@ -367,31 +367,49 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
     return lines
 
 
-def analyse(results_dir: str | Path) -> str:
-    """Write runs.csv and the reports of the study's suites in ``results_dir``; return the ``all_runs`` markdown."""
+def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str:
+    """Write runs.csv and the reports of the study's suites in ``results_dir``; return the ``all_runs`` markdown.
+
+    With ``suites``, only those suites' reports are rewritten (``all_runs.md`` too only if named, as ``all_runs``);
+    the return value is then the last report written."""
+    chosen = None if suites is None else set(suites)
+    if chosen is not None:
+        known = {name for name, suite in SUITES.items() if suite.study != "ablation"} | {"all_runs"}
+        if unknown := sorted(chosen - known):
+            raise ValueError(f"unknown suite(s) {unknown}: this study's reports are {sorted(known)}")
     out = Path(results_dir)
     episodes, runs = load(out)
     if runs.empty:
         raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")
     runs.to_csv(out / "runs.csv", index=False)
+    text = ""
     for suite in SUITES.values():
         if suite.study == "ablation":  # its tables: benchmarks.ablation_analysis
+            continue
+        if chosen is not None and suite.name not in chosen:
             continue
         cells = {(a, e, s) for a, e, s in suite.cells()}
         mine = runs[[c in cells for c in zip(runs["algo"], runs["env"], runs["seed"], strict=True)]]
         if not mine.empty:
             text = report(f"Benchmark suite `{suite.name}`", episodes, mine, out, suite.name, suite)
             (out / f"{suite.name}.md").write_text(text)
-    text = report("All finished runs", episodes, runs, out, "all_runs")
-    (out / "all_runs.md").write_text(text)
+    if chosen is None or "all_runs" in chosen:
+        text = report("All finished runs", episodes, runs, out, "all_runs")
+        (out / "all_runs.md").write_text(text)
     return text
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--results", default=str(Path(__file__).parent / "results" / "sweep"), help="the study's folder")
+    parser.add_argument(
+        "--suites", nargs="+", default=None, help="rewrite only these suites' reports ('all_runs' for all_runs.md)"
+    )
     args = parser.parse_args(argv)
-    print(analyse(args.results))
+    try:
+        print(analyse(args.results, args.suites))
+    except ValueError as error:
+        parser.error(str(error))
 
 
 if __name__ == "__main__":

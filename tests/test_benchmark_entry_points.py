@@ -38,6 +38,10 @@ def test_run_and_analysis_command_lines(tmp_path, monkeypatch):
     args = ["--algos", "denfac_default", "cmaes", "--envs", "pendulum", "--seeds", "0", "1", "--episodes", "2"]
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
     assert len(store.read_runs(tmp_path)) == 4 and not (tmp_path / "all_runs.md").exists()
+    analysis.main(["--results", str(tmp_path), "--suites", "generalisation"])
+    assert (tmp_path / "generalisation.md").exists() and not (tmp_path / "all_runs.md").exists()
+    with pytest.raises(SystemExit):
+        analysis.main(["--results", str(tmp_path), "--suites", "figure"])
     analysis.main(["--results", str(tmp_path)])
     assert "DENFAC (default)" in (tmp_path / "all_runs.md").read_text()
 
