@@ -313,11 +313,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="record DENFAC's critic-fit diagnostics every N episodes (0: none; default: the suite's, else none)",
     )
     args = parser.parse_args(argv)
+    try:
+        episodes = parse_episodes(args.episodes, args.envs)
+        select_cells(args.suite, args.algos, args.envs, args.seeds)  # bad names: a usage error, before any run
+    except ValueError as error:
+        parser.error(str(error))
+    if args.diagnostics_every is not None and args.diagnostics_every < 0:
+        parser.error(f"--diagnostics-every must be >= 0 (0: none), got {args.diagnostics_every}")
     status = sweep(
         args.algos,
         args.envs,
         args.seeds,
-        parse_episodes(args.episodes, args.envs),
+        episodes,
         suite=args.suite,
         results_dir=args.results,
         hyperparams_dirs=args.hyperparams,

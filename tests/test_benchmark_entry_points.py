@@ -106,3 +106,21 @@ def test_long_hopper_record_script():
     row = json.loads(result.stdout.strip().splitlines()[-1])
     assert row["ep"] == 10 and row["len"] > 0 and abs(row["beyond"] - (row["ret"] - row["len"])) < 1e-6
     assert abs(row["q"]) < 1000
+
+
+@pytest.mark.parametrize(
+    ("args", "cause"),
+    [
+        (["--algos", "denfac_dflt", "--envs", "pendulum", "--seeds", "0"], "unknown --algos ['denfac_dflt']"),
+        (["--suite", "figure3", "--envs", "hopper"], "--envs ['hopper'] not in suite 'figure3'"),
+        (["--algos", "cmaes", "--envs", "pendulum"], "give --suite, or --algos, --envs and --seeds"),
+        (["--suite", "figure3", "--episodes", "pendulum:3"], "expected N or ENV=N"),
+        (["--suite", "figure3", "--diagnostics-every", "-1"], "--diagnostics-every must be >= 0"),
+    ],
+)
+def test_runner_names_a_bad_argument_as_a_usage_error(tmp_path, capsys, args, cause):
+    with pytest.raises(SystemExit) as exit_info:
+        runner.main([*args, "--results", str(tmp_path), "--workers", "0"])
+    assert exit_info.value.code == 2  # argparse's usage error: a message, not a traceback, and no run started
+    assert cause in capsys.readouterr().err
+    assert not store.runs_path(tmp_path).exists()
