@@ -162,6 +162,10 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # 500 steps: a target time constant of 200 steps) about 2.5 times
     c["default05+K5"] = merge(c["default05"], dict(n_fitted_iterations=5, critic_steps=100, actor_steps=50))
     c["default05+K2"] = merge(c["default05"], dict(n_fitted_iterations=2, critic_steps=250, actor_steps=125))
+    # The targets' next actions drawn as widely as the behaviour's (section 20): 0.5's smoothing noise (0.2) is twice
+    # the exploration's sigma (0.1), so eq. (4) reads Q_{k-1} at actions the data hardly covers; SAC's targets sample the
+    # policy it explores with
+    c["default05+tpn0.1"] = merge(c["default05"], dict(target_policy_noise=0.1))
     return c
 
 
