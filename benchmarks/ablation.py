@@ -166,6 +166,7 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # the exploration's sigma (0.1), so eq. (4) reads Q_{k-1} at actions the data hardly covers; SAC's targets sample the
     # policy it explores with
     c["default05+tpn0.1"] = merge(c["default05"], dict(target_policy_noise=0.1))
+    c["default05+tpn0.3"] = merge(c["default05"], dict(target_policy_noise=0.3))  # and wider than 0.5's
     return c
 
 
