@@ -8,6 +8,7 @@ with its reference range for the IQM). All intervals are 95% percentile interval
 from __future__ import annotations
 
 import contextlib
+import warnings
 from collections.abc import Iterator
 
 import numpy as np
@@ -23,11 +24,14 @@ MEASURES = {"final_best": "best-so-far at the budget (the paper's measure)", "la
 @contextlib.contextmanager
 def _seeded() -> Iterator[np.random.RandomState]:
     """A fixed random state for one rliable call. rliable 1.2's stratified bootstraps draw their indices from numpy's
-    *global* generator and ignore ``random_state``: the global one is seeded too, and restored afterwards."""
+    *global* generator and ignore ``random_state``: the global one is seeded too, and restored afterwards. The
+    FutureWarning that arch (rliable's bootstrap) gives for that legacy argument, once per call, is silenced here."""
     state = np.random.get_state()
     np.random.seed(0)
     try:
-        yield np.random.RandomState(0)  # rliable's API takes the legacy RandomState
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning, r"arch\.")
+            yield np.random.RandomState(0)  # rliable's API takes the legacy RandomState
     finally:
         np.random.set_state(state)
 

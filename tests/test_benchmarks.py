@@ -486,3 +486,18 @@ def test_survival_bonus_separates_standing_from_moving(tmp_path):
     # both reach a return of 1000 at episode 1 or 3; only the hopping run earns 100 beyond the bonus, at episode 1
     assert cell[ALGOS["sac_matched"].label].startswith("3 ep, 600 steps, 3 CPU s (1/1)")
     assert moving[ALGOS["sac_matched"].label] == "1 ep, 100 steps, 1 CPU s (1/1); last-10 600"
+
+
+def test_bootstrap_intervals_print_no_warning_per_call(monkeypatch):
+    """arch (under rliable) warns about the legacy ``random_state`` on every bootstrap; a report makes hundreds."""
+    import warnings
+
+    import pandas as pd
+
+    monkeypatch.setattr(st, "REPS", 50)
+    runs = pd.DataFrame([(a, "pendulum", s, -100.0 * s - (a == "y")) for a in "xy" for s in range(4)],
+                        columns=["algo", "env", "seed", "final_best"])  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        st.iqm_table(runs, ["pendulum"], "final_best")
+        st.probability_of_improvement(runs, "x", "y", ["pendulum"], "final_best")
