@@ -182,7 +182,8 @@ def _first_reach(episodes: pd.DataFrame, r: pd.DataFrame, column: str, level: fl
 def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str] = ANSWER_ALGOS) -> pd.DataFrame:
     """Per env, per algorithm: medians over the runs that reached :data:`ANSWER_LEVELS` (else the env's threshold) of
     the episodes, env steps and CPU seconds to first reach it (reached/runs), and over all runs the fall-back fraction
-    after the threshold and the last-10 mean. An env that pays a survival bonus gets a second row: the first episode
+    after the threshold, the last-10 mean (of the exploring episodes) and the last deterministic evaluation (of the
+    final policy, ``run_one``'s ``eval_episodes``). An env that pays a survival bonus gets a second row: the first episode
     earning :data:`BEYOND_BONUS_LEVEL` beyond it, and the last-10 mean beyond it."""
     rows = []
     for env in _env_order(runs["env"]):
@@ -200,9 +201,13 @@ def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str
                 continue
             reach = _first_reach(episodes, r, "best_so_far", level, facts.lower_is_better)
             fall_back = f"{r['fall_back'].median():.2f}" if r["fall_back"].notna().any() else "–"
-            row[ALGOS[algo].label] = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
+            cell = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
             if facts.survival_bonus is not None:
-                row[ALGOS[algo].label] += f" ({r['last10_beyond_survival'].median():.4g} beyond the survival bonus)"
+                cell += f" ({r['last10_beyond_survival'].median():.4g} beyond the survival bonus)"
+            if "final_eval" in r and r["final_eval"].notna().any():
+                cell += f"; final eval {r['final_eval'].median():.4g}"
+            row[ALGOS[algo].label] = cell
+            if facts.survival_bonus is not None:
                 e = episodes.assign(
                     beyond=beyond_survival(episodes["return"], episodes["length"], facts.survival_bonus)
                     if {"return", "length"} <= set(episodes)
@@ -313,9 +318,11 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
         lines += ["## The user's answer: to the threshold, and after it", "",
                   "Medians over the runs that reached the level (the env's threshold, or `analysis.ANSWER_LEVELS`) of "
                   "the episodes, env steps and CPU seconds (cumulative, at the end of that episode) it took (reached/"
-                  "runs); over all runs, the fall-back fraction after the threshold and the last-10 mean (where the "
-                  "env pays a survival bonus, also the last-10 mean beyond it, and a second row: the first episode "
-                  f"earning {BEYOND_BONUS_LEVEL:g} beyond the bonus, i.e. moving, not only standing).", "",
+                  "runs); over all runs, the fall-back fraction after the threshold, the last-10 mean of the exploring "
+                  "episodes and the final eval, the deterministic policy's return after the last episode (mean of the "
+                  "suite's evaluation episodes). Where the env pays a survival bonus, also the last-10 mean beyond it, "
+                  "and a second row: the first episode "
+                  f"earning {BEYOND_BONUS_LEVEL:g} beyond the bonus, i.e. moving, not only standing.", "",
                   _md(answer_table(episodes, runs)), ""]  # fmt: skip
     lines += aggregates(runs, envs, out, stem)
     if suite is None or suite.name == "figure3":

@@ -444,12 +444,13 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
             rows.append(dict(algo="sac_matched", env="invertedpendulum", seed=seed, episode=i + 1, performance=ret,
                              best_so_far=best, timesteps=100 * (i + 1), cpu_time=10.0 * (i + 1)))  # fmt: skip
     episodes = pd.DataFrame(rows)
-    runs = pd.DataFrame([dict(algo="sac_matched", env="invertedpendulum", seed=s, fall_back=0.0, last10=v)
-                         for s, v in ((0, 833.3), (1, 300.0))])  # fmt: skip
+    runs = pd.DataFrame([dict(algo="sac_matched", env="invertedpendulum", seed=s, fall_back=0.0, last10=v, final_eval=e)
+                         for s, v, e in ((0, 833.3, 1000.0), (1, 300.0, 500.0))])  # fmt: skip
     table = analysis.answer_table(episodes, runs, algos=("sac_matched", "denfac_default"))
     row = table.set_index("env").loc["invertedpendulum"]
     assert row["level"] == ">= 1000"
     assert row[ALGOS["sac_matched"].label].startswith("2 ep, 200 steps, 20 CPU s (1/2); fall-back 0.00")
+    assert row[ALGOS["sac_matched"].label].endswith("last-10 566.6; final eval 750")  # the deterministic policy's
     assert row[ALGOS["denfac_default"].label] == "–"
 
 
