@@ -269,7 +269,8 @@ def sweep(
 
 
 def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = None) -> dict[str, int] | None:
-    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}``; envs without a value keep their budget."""
+    """``["60", "halfcheetah=20"]`` -> ``{env: 60, ..., "halfcheetah": 20}``; envs without a value keep their budget.
+    One N at most, and one value per env: ``--episodes 100 40`` (read as one per env) is an error, not the last one."""
     if not values:
         return None
     default, per_env = None, {}
@@ -277,6 +278,12 @@ def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = No
         name, sep, number = value.rpartition("=")
         if not number.isdigit():
             raise ValueError(f"--episodes: expected N or ENV=N, got {value!r}")
+        if sep and name in per_env:
+            raise ValueError(f"--episodes: two values for {name!r} ({per_env[name]} and {number})")
+        if not sep and default is not None:
+            raise ValueError(
+                f"--episodes: one N applies to every env, got {default} and {number}; give ENV=N for each env's own"
+            )
         if sep:
             per_env[name] = int(number)
         else:

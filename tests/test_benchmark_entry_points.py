@@ -115,6 +115,8 @@ def test_long_hopper_record_script():
         (["--suite", "figure3", "--envs", "hopper"], "--envs ['hopper'] not in suite 'figure3'"),
         (["--algos", "cmaes", "--envs", "pendulum"], "give --suite, or --algos, --envs and --seeds"),
         (["--suite", "figure3", "--episodes", "pendulum:3"], "expected N or ENV=N"),
+        (["--suite", "figure3", "--episodes", "100", "40"], "one N applies to every env, got 100 and 40"),
+        (["--suite", "figure3", "--episodes", "pendulum=3", "pendulum=4"], "two values for 'pendulum'"),
         (["--suite", "figure3", "--diagnostics-every", "-1"], "--diagnostics-every must be >= 0"),
     ],
 )
