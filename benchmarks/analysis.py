@@ -194,6 +194,12 @@ def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str
         op = "<" if facts.lower_is_better else ">="
         row = {"env": env, "level": f"{op} {level:g}"}
         moving = {"env": env, "level": f"beyond the survival bonus >= {BEYOND_BONUS_LEVEL:g}"}
+        if facts.survival_bonus is not None:
+            with_beyond = episodes.assign(
+                beyond=beyond_survival(episodes["return"], episodes["length"], facts.survival_bonus)
+                if {"return", "length"} <= set(episodes)
+                else np.nan
+            )
         for algo in algos:
             r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
             if r.empty:
@@ -203,18 +209,13 @@ def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str
             fall_back = f"{r['fall_back'].median():.2f}" if r["fall_back"].notna().any() else "–"
             cell = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
             if facts.survival_bonus is not None:
-                cell += f" ({r['last10_beyond_survival'].median():.4g} beyond the survival bonus)"
-            if "final_eval" in r and r["final_eval"].notna().any():
+                beyond = r["last10_beyond_survival"].median()
+                cell += f" ({beyond:.4g} beyond the survival bonus)"
+                moving_reach = _first_reach(with_beyond, r, "beyond", BEYOND_BONUS_LEVEL, False)
+                moving[ALGOS[algo].label] = f"{moving_reach}; last-10 {beyond:.4g}"
+            if r["final_eval"].notna().any():
                 cell += f"; final eval {r['final_eval'].median():.4g}"
             row[ALGOS[algo].label] = cell
-            if facts.survival_bonus is not None:
-                e = episodes.assign(
-                    beyond=beyond_survival(episodes["return"], episodes["length"], facts.survival_bonus)
-                    if {"return", "length"} <= set(episodes)
-                    else np.nan
-                )
-                reach = _first_reach(e, r, "beyond", BEYOND_BONUS_LEVEL, False)
-                moving[ALGOS[algo].label] = f"{reach}; last-10 {r['last10_beyond_survival'].median():.4g}"
         rows.append(row)
         if facts.survival_bonus is not None:
             rows.append(moving)

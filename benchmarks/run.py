@@ -278,15 +278,15 @@ def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = No
         name, sep, number = value.rpartition("=")
         if not number.isdigit():
             raise ValueError(f"--episodes: expected N or ENV=N, got {value!r}")
-        if sep and name in per_env:
-            raise ValueError(f"--episodes: two values for {name!r} ({per_env[name]} and {number})")
-        if not sep and default is not None:
-            raise ValueError(
-                f"--episodes: one N applies to every env, got {default} and {number}; give ENV=N for each env's own"
-            )
         if sep:
+            if name in per_env:
+                raise ValueError(f"--episodes: two values for {name!r} ({per_env[name]} and {number})")
             per_env[name] = int(number)
         else:
+            if default is not None:
+                raise ValueError(
+                    f"--episodes: one N applies to every env, got {default} and {number}; give ENV=N for each env's own"
+                )
             default = int(number)
     names = set(envs or ()) | set(per_env) | set(suites.ENVS)
     return {env: per_env.get(env, default) for env in names if per_env.get(env, default) is not None}
