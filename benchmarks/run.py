@@ -169,6 +169,7 @@ def sweep(
     analysis: bool = True,
     verbose: int = 1,
     diagnostics_every: int | None = None,
+    device: str = "cpu",
 ) -> dict[str, list]:
     """Run the cells of :func:`select_cells` that ``results_dir`` does not hold yet; return ``{"done", "skipped",
     "failed"}`` lists of tasks.
@@ -178,6 +179,7 @@ def sweep(
     ``zoo_logs``: a folder to also write the RL Zoo's ``evaluations.npz`` files to (None: none).
     ``diagnostics_every``: record DENFAC's critic-fit diagnostics every that many episodes (0: none; None: the
     suite's, else none).
+    ``device``: the torch device of every run (``"cuda"`` on a GPU machine; each worker its own process there).
     """
     cells = select_cells(suite, algos, envs, seeds)
     if isinstance(episodes, int):
@@ -213,6 +215,7 @@ def sweep(
             "eval_episodes": budget.eval_episodes,
             "eval_kwargs": dict(budget.eval_kwargs),
             "diagnostics_every": diagnostics_every,
+            "device": device,
         }
         (status["skipped"] if (algo, env, int(seed), budget.episodes) in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
@@ -220,7 +223,7 @@ def sweep(
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
     sweep_info = {
         "git": git,
-        "machine": task_module.machine_info(),
+        "machine": task_module.machine_info(device),
         "load_average": os.getloadavg(),
         "suite": suite,
         "cells": [[a, e, s] for a, e, s in cells],
@@ -292,6 +295,20 @@ def parse_episodes(values: Sequence[str] | None, envs: Sequence[str] | None = No
     return {env: per_env.get(env, default) for env in names if per_env.get(env, default) is not None}
 
 
+def check_device(device: str) -> None:
+    """A ``--device`` torch can use here, else a ValueError that says why (before any run starts and fails on it)."""
+    import torch
+
+    try:
+        kind = torch.device(device).type
+    except RuntimeError as error:
+        raise ValueError(f"--device {device!r} is not a torch device (cpu, cuda, cuda:1...): {error}") from None
+    if kind == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"--device {device!r}: torch sees no CUDA GPU here (torch.cuda.is_available() is False)")
+    if kind not in ("cpu", "cuda"):
+        raise ValueError(f"--device {device!r}: the benchmark runs on cpu or cuda")
+
+
 def _exit_on_sigterm(signum: int, frame: Any) -> None:
     raise SystemExit(f"interrupted by signal {signum}; finished runs are kept, rerun the same command to resume")
 
@@ -319,8 +336,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="record DENFAC's critic-fit diagnostics every N episodes (0: none; default: the suite's, else none)",
     )
+    parser.add_argument("--device", default="cpu", help="torch device of the runs: cpu (default), or cuda on a GPU machine")
     args = parser.parse_args(argv)
     try:
+        check_device(args.device)
         episodes = parse_episodes(args.episodes, args.envs)
         select_cells(args.suite, args.algos, args.envs, args.seeds)  # bad names: a usage error, before any run
     except ValueError as error:
@@ -340,6 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         zoo_logs=args.zoo_logs,
         analysis=not args.no_analysis,
         diagnostics_every=args.diagnostics_every,
+        device=args.device,
     )
     print(f"finished: {len(status['done'])} done, {len(status['skipped'])} skipped, {len(status['failed'])} failed")
     return 1 if status["failed"] else 0

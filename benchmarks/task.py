@@ -80,7 +80,11 @@ class RunClock(BaseCallback):
 
 
 def git_state() -> dict[str, Any]:
+    """The commit run and the benchmark's uncommitted changes; where the tree travelled without ``.git`` (a lent GPU
+    machine), the commit given in ``BENCHMARK_GIT_COMMIT``."""
     git: dict[str, Any] = {}
+    if os.environ.get("BENCHMARK_GIT_COMMIT"):
+        git["commit"] = os.environ["BENCHMARK_GIT_COMMIT"]
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         run = functools.partial(subprocess.run, cwd=_REPO, capture_output=True, text=True, timeout=10, check=True)
         git["commit"] = run(["git", "rev-parse", "HEAD"]).stdout.strip()
@@ -91,7 +95,8 @@ def git_state() -> dict[str, Any]:
     return git
 
 
-def machine_info() -> dict[str, Any]:
+def machine_info(device: str = "cpu") -> dict[str, Any]:
+    """The machine a run trained on: host, CPU, torch; and ``device``, with the GPU's name when it is not the CPU."""
     import torch
 
     cpu = ""
@@ -100,7 +105,7 @@ def machine_info() -> dict[str, Any]:
             if line.startswith("model name"):
                 cpu = line.split(":", 1)[1].strip()
                 break
-    return {
+    info = {
         "host": platform.node(),
         "nproc": os.cpu_count(),
         "cpu_model": cpu or platform.processor(),
@@ -108,7 +113,12 @@ def machine_info() -> dict[str, Any]:
         "torch": torch.__version__,
         "torch_threads": torch.get_num_threads(),
         "platform": platform.platform(),
+        "device": device,
     }
+    if torch.device(device).type == "cuda":
+        info["gpu"] = torch.cuda.get_device_name(torch.device(device))
+        info["cuda"] = torch.version.cuda
+    return info
 
 
 class GradientSteps(BaseCallback):
@@ -181,6 +191,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
     log = io.StringIO()
     load_start = os.getloadavg()
     key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+    device = task.get("device", "cpu")  # "cuda": the networks on the GPU; CPU seconds then leave out the GPU's work
     try:
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             import gymnasium as gym
@@ -194,7 +205,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             facts = env_facts(task["env"])
             hyperparams, source = task["hyperparams"], task["hyperparams_source"]
             start, cpu_start = time.perf_counter(), time.process_time()
-            model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device="cpu")
+            model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device=device)
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
@@ -236,7 +247,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
         "lower_is_better": facts.lower_is_better,
         "git": task.get("git") or git_state(),
-        "machine": machine_info(),
+        "machine": machine_info(device),
         "load_average": {"start": load_start, "end": os.getloadavg()},
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "episodes": columns(episodes),

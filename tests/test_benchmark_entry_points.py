@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 from benchmarks import (
     ablation_analysis,
@@ -16,6 +17,7 @@ from benchmarks import (
     cost,
     stats,
     store,
+    throughput,
     update_cost,
     update_cost_critics,
     update_threads,
@@ -89,6 +91,26 @@ def test_update_cost_entry_points(tmp_path):
     assert len(json.loads((tmp_path / "threads.json").read_text())) == 1
 
 
+def test_throughput_prices_runs_side_by_side(tmp_path, capsys):
+    """Two processes train at once (one per env), each past its warm-up; the table prices a run from their rates."""
+    out = tmp_path / "throughput.json"
+    args = ["--algo", "td3", "--envs", "pendulum", "acrobot", "--seconds", "1", "--steps", "1000"]
+    throughput.main([*args, "--output", str(out)])
+    (run,) = json.loads(out.read_text())
+    assert [r["env"] for r in run["records"]] == ["pendulum", "acrobot"]
+    assert all(r["steps"] > 0 and r["seconds"] >= 1 for r in run["records"])
+    assert run["machine"]["device"] == "cpu" and "| pendulum | 1 |" in capsys.readouterr().out
+
+
+def test_runs_record_their_device_and_commit(tmp_path, monkeypatch):
+    monkeypatch.setenv("BENCHMARK_GIT_COMMIT", "f" * 40)  # a tree that travelled without .git keeps its commit
+    monkeypatch.setattr(runner.task_module, "_REPO", tmp_path)  # no git repository there
+    args = ["--algos", "td3", "--envs", "pendulum", "--seeds", "0", "--episodes", "1", "--device", "cpu"]
+    assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
+    (run,) = store.read_runs(tmp_path)
+    assert run["machine"]["device"] == "cpu" and run["git"]["commit"] == "f" * 40
+
+
 def test_acrobot_horizon(tmp_path):
     acrobot_horizon.main(["--restarts", "1", "--generations", "2", "--switches", "1", "--stride", "25",
                           "--output", str(tmp_path)])  # fmt: skip
@@ -118,6 +140,12 @@ def test_long_hopper_record_script():
         (["--suite", "figure3", "--episodes", "100", "40"], "one N applies to every env, got 100 and 40"),
         (["--suite", "figure3", "--episodes", "pendulum=3", "pendulum=4"], "two values for 'pendulum'"),
         (["--suite", "figure3", "--diagnostics-every", "-1"], "--diagnostics-every must be >= 0"),
+        (["--suite", "figure3", "--device", "gpu0"], "--device 'gpu0' is not a torch device"),
+        pytest.param(
+            ["--suite", "figure3", "--device", "cuda"],
+            "torch sees no CUDA GPU here",
+            marks=pytest.mark.skipif(torch.cuda.is_available(), reason="a CUDA GPU is there"),
+        ),
     ],
 )
 def test_runner_names_a_bad_argument_as_a_usage_error(tmp_path, capsys, args, cause):

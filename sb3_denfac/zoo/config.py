@@ -43,7 +43,12 @@ ALGORITHMS: dict[str, str] = {
     "cmaes": "sb3_denfac.cmaes:CMAES",
 }
 
-HYPERPARAMS_DIR = Path(importlib.util.find_spec("sb3_denfac.hyperparams").submodule_search_locations[0])
+_SPEC = importlib.util.find_spec("sb3_denfac.hyperparams")
+# Installed (also editable): the package data of sb3_denfac.hyperparams. Run from a source tree on PYTHONPATH, with no
+# install (a machine with no package index): the checkout's own hyperparams/ folder beside the package.
+HYPERPARAMS_DIR = (
+    Path(_SPEC.submodule_search_locations[0]) if _SPEC is not None else Path(__file__).resolve().parents[2] / "hyperparams"
+)
 """The zoo YAML files: ``hyperparams/`` of the repository, installed as the package data of ``sb3_denfac.hyperparams``."""
 
 #: Ids of the paper's environments registered by ``import sb3_denfac`` (their one list: ``sb3_denfac.envs``).
