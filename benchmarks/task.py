@@ -5,6 +5,9 @@ Per episode (``EpisodePerformanceCallback``): the paper's measure, its best so f
 count; plus (:class:`RunClock`) the run's CPU seconds so far. Every ``eval_every`` episodes, and at the last one, the
 policy that played the episode is evaluated deterministically on a separate env for ``eval_episodes`` episodes; the
 evaluation's own CPU time is left out of the run's CPU seconds.
+
+With ``BENCHMARK_PROGRESS_DIR`` set, each run also rewrites ``<algo>_<env>_<seed>.json`` there at every episode end
+(episodes, steps, CPU and wall seconds so far): how far a run got when a lease or a session ends before it does.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import io
+import json
 import os
 import platform
 import subprocess
@@ -49,8 +53,16 @@ class RunClock(BaseCallback):
     :param eval_every: evaluate after every ``eval_every``-th episode and after episode ``max_episodes``.
     """
 
-    def __init__(self, eval_env: Any = None, eval_every: int = 10, eval_episodes: int = 1, max_episodes: int = 0):
+    def __init__(
+        self,
+        eval_env: Any = None,
+        eval_every: int = 10,
+        eval_episodes: int = 1,
+        max_episodes: int = 0,
+        progress_path: Path | None = None,
+    ):
         super().__init__()
+        self.progress_path = progress_path
         self.eval_env, self.eval_every, self.eval_episodes, self.max_episodes = (
             eval_env,
             eval_every,
@@ -59,11 +71,11 @@ class RunClock(BaseCallback):
         )
         self.cpu_times: list[float] = []  # cumulative training CPU seconds at each episode end
         self.evaluations: list[dict[str, Any]] = []
-        self._start = 0.0
+        self._start = self._wall_start = 0.0
         self.eval_cpu_time = 0.0
 
     def _on_training_start(self) -> None:
-        self._start = time.process_time()
+        self._start, self._wall_start = time.process_time(), time.perf_counter()
 
     def _on_step(self) -> bool:
         for done in self.locals["dones"]:
@@ -76,6 +88,10 @@ class RunClock(BaseCallback):
                 scores = evaluate(self.model, self.eval_env, self.eval_episodes)
                 self.eval_cpu_time += time.process_time() - before
                 self.evaluations.append({"episode": episode, "scores": scores})
+            if self.progress_path is not None:
+                progress = {"episodes": episode, "timesteps": self.num_timesteps, "cpu_time": self.cpu_times[-1]}
+                progress["wall_time"] = time.perf_counter() - self._wall_start
+                self.progress_path.write_text(json.dumps(progress))
         return True
 
 
@@ -210,7 +226,9 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
             performance = EpisodePerformanceCallback(max_episodes=task["episodes"], lower_is_better=facts.lower_is_better)
-            clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"])
+            progress = os.environ.get("BENCHMARK_PROGRESS_DIR")
+            progress_path = Path(progress) / f"{task['algo']}_{task['env']}_{task['seed']}.json" if progress else None
+            clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"], progress_path)
             steps = GradientSteps()
             callbacks = [performance, clock, steps]
             diagnose = bool(task.get("diagnostics_every")) and hasattr(model, "n_fitted_iterations")  # DENFAC's buffer

@@ -102,13 +102,16 @@ def test_throughput_prices_runs_side_by_side(tmp_path, capsys):
     assert run["machine"]["device"] == "cpu" and "| pendulum | 1 |" in capsys.readouterr().out
 
 
-def test_runs_record_their_device_and_commit(tmp_path, monkeypatch):
+def test_runs_record_their_device_commit_and_progress(tmp_path, monkeypatch):
     monkeypatch.setenv("BENCHMARK_GIT_COMMIT", "f" * 40)  # a tree that travelled without .git keeps its commit
     monkeypatch.setattr(runner.task_module, "_REPO", tmp_path)  # no git repository there
+    monkeypatch.setenv("BENCHMARK_PROGRESS_DIR", str(tmp_path))
     args = ["--algos", "td3", "--envs", "pendulum", "--seeds", "0", "--episodes", "1", "--device", "cpu"]
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
     (run,) = store.read_runs(tmp_path)
     assert run["machine"]["device"] == "cpu" and run["git"]["commit"] == "f" * 40
+    progress = json.loads((tmp_path / "td3_pendulum_0.json").read_text())  # the last episode's
+    assert progress["episodes"] == 1 and progress["timesteps"] == run["timesteps"] == 200
 
 
 def test_acrobot_horizon(tmp_path):
