@@ -108,3 +108,45 @@ def write_records(results_dir: str | Path, records: list[dict[str, Any]]) -> Non
     text = "".join(_line(record) for record in records)
     tmp.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))  # one member: compresses best
     os.replace(tmp, path)
+
+
+def merge(results_dir: str | Path, sources: list[str | Path]) -> list[Cell]:
+    """Append to ``results_dir`` the finished runs of other runs files (a sweep run on another machine, with its own
+    ``--results``) whose cells it does not hold yet; return those cells. A source is a runs file or a results folder."""
+    repair(results_dir)
+    held = finished_cells(results_dir)
+    added: list[Cell] = []
+    for source in sources:
+        source = Path(source)
+        if not source.exists():
+            raise FileNotFoundError(f"no runs file at {source}")
+        folder, name = (source, RUNS_FILE) if source.is_dir() else (source.parent, source.name)
+        path = folder / name
+        for text, _ in _members(path.read_bytes()):
+            for line in text.decode().splitlines():
+                record = json.loads(line)
+                if record.get("status") == "done" and cell_of(record) not in held:
+                    append_record(results_dir, record)
+                    held.add(cell_of(record))
+                    added.append(cell_of(record))
+    return added
+
+
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Merge the finished runs of runs files into a study's results folder.")
+    parser.add_argument("sources", nargs="+", help="runs files (any name) or results folders")
+    parser.add_argument("--into", required=True, help="the study's results folder (e.g. benchmarks/results/sweep)")
+    args = parser.parse_args(argv)
+    try:
+        added = merge(args.into, args.sources)
+    except FileNotFoundError as error:
+        parser.error(str(error))
+    for algo, env, seed, episodes in added:
+        print(f"added {algo} {env} seed {seed} ({episodes} episodes)")
+    print(f"{len(added)} runs added to {runs_path(args.into)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -96,11 +96,11 @@ class RunClock(BaseCallback):
 
 
 def git_state() -> dict[str, Any]:
-    """The commit run and the benchmark's uncommitted changes; where the tree travelled without ``.git`` (a lent GPU
-    machine), the commit given in ``BENCHMARK_GIT_COMMIT``."""
+    """The commit run and the benchmark's uncommitted changes; or the commit given in ``BENCHMARK_GIT_COMMIT``, for a
+    tree that travelled without its own ``.git`` (a lent GPU machine's copy holds an older snapshot's)."""
+    if os.environ.get("BENCHMARK_GIT_COMMIT"):  # given: it wins over a .git that may be another snapshot's
+        return {"commit": os.environ["BENCHMARK_GIT_COMMIT"], "source": "BENCHMARK_GIT_COMMIT"}
     git: dict[str, Any] = {}
-    if os.environ.get("BENCHMARK_GIT_COMMIT"):
-        git["commit"] = os.environ["BENCHMARK_GIT_COMMIT"]
     with contextlib.suppress(OSError, subprocess.SubprocessError):
         run = functools.partial(subprocess.run, cwd=_REPO, capture_output=True, text=True, timeout=10, check=True)
         git["commit"] = run(["git", "rev-parse", "HEAD"]).stdout.strip()

@@ -103,8 +103,7 @@ def test_throughput_prices_runs_side_by_side(tmp_path, capsys):
 
 
 def test_runs_record_their_device_commit_and_progress(tmp_path, monkeypatch):
-    monkeypatch.setenv("BENCHMARK_GIT_COMMIT", "f" * 40)  # a tree that travelled without .git keeps its commit
-    monkeypatch.setattr(runner.task_module, "_REPO", tmp_path)  # no git repository there
+    monkeypatch.setenv("BENCHMARK_GIT_COMMIT", "f" * 40)  # the commit given wins over the .git of the tree run
     monkeypatch.setenv("BENCHMARK_PROGRESS_DIR", str(tmp_path))
     args = ["--algos", "td3", "--envs", "pendulum", "--seeds", "0", "--episodes", "1", "--device", "cpu"]
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
@@ -112,6 +111,21 @@ def test_runs_record_their_device_commit_and_progress(tmp_path, monkeypatch):
     assert run["machine"]["device"] == "cpu" and run["git"]["commit"] == "f" * 40
     progress = json.loads((tmp_path / "td3_pendulum_0.json").read_text())  # the last episode's
     assert progress["episodes"] == 1 and progress["timesteps"] == run["timesteps"] == 200
+
+
+def test_store_merges_runs_from_another_machine(tmp_path, capsys):
+    """Runs made elsewhere (their own --results) join the study; a cell it already holds is kept, not doubled."""
+    args = ["--algos", "td3", "--envs", "pendulum", "--episodes", "1", "--workers", "0", "--no-analysis"]
+    here, there = tmp_path / "here", tmp_path / "there"
+    assert runner.main([*args, "--seeds", "0", "--results", str(here)]) == 0
+    assert runner.main([*args, "--seeds", "0", "1", "--results", str(there)]) == 0
+    store.main([str(store.runs_path(there)), "--into", str(here)])
+    assert "added td3 pendulum seed 1 (1 episodes)" in capsys.readouterr().out
+    assert sorted(r["seed"] for r in store.read_runs(here)) == [0, 1]
+    assert store.merge(here, [there]) == []  # again: nothing new
+    with pytest.raises(SystemExit):
+        store.main([str(tmp_path / "missing.jsonl.gz"), "--into", str(here)])
+    assert "no runs file at" in capsys.readouterr().err
 
 
 def test_acrobot_horizon(tmp_path):
