@@ -28,7 +28,7 @@ RUN_FIELDS = [
     *("algo", "env", "seed", "episodes", "timesteps", "cpu_time", "eval_cpu_time", "wall_time", "final_best", "last10"),
     *("final_eval", "episodes_to_threshold", "fall_back", "cpu_per_episode", "gradient_steps", "trained"),
     "last10_beyond_survival",
-    *("hyperparams_source", "commit"),
+    *("hyperparams_source", "commit", "device"),
 ]
 #: The rows of the user's answer (suite ``matched``): DENFAC's default against SAC at each schedule.
 ANSWER_ALGOS = ("denfac_default", "denfac_default04", "sac", "sac_matched", "td3_matched")
@@ -97,6 +97,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "trained": bool(meta.get("timesteps", 0) > _learning_starts(meta) and len(eps) >= 2),
                 "hyperparams_source": meta.get("hyperparams_source", ""),
                 "commit": (meta.get("git") or {}).get("commit", "")[:10],
+                "device": (meta.get("machine") or {}).get("gpu") or (meta.get("machine") or {}).get("device", "cpu"),
             }
         )
     episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame()
@@ -296,6 +297,13 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
     envs, algos = _env_order(runs["env"]), _order(runs["algo"])
     commits = sorted(set(runs["commit"]))
     lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
+    on_gpu = runs[runs["device"] != "cpu"]
+    if not on_gpu.empty:  # their CPU seconds are not comparable with the others'
+        cells = [
+            f"{ALGOS[a].label if a in ALGOS else a} {e} seeds {', '.join(map(str, sorted(g['seed'])))} ({d})"
+            for (a, e, d), g in on_gpu.groupby(["algo", "env", "device"])
+        ]
+        lines += [f"Trained on a GPU (their CPU seconds leave out the GPU's work): {'; '.join(cells)}.", ""]
     plots.curves(episodes, envs, algos, out / f"{stem}.png")
     plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")
     lines += [f"![curves]({stem}.png)", "", f"![compute]({stem}_compute.png)", ""]

@@ -170,6 +170,7 @@ def sweep(
     verbose: int = 1,
     diagnostics_every: int | None = None,
     device: str = "cpu",
+    checkpoint_every: float = 600.0,
 ) -> dict[str, list]:
     """Run the cells of :func:`select_cells` that ``results_dir`` does not hold yet; return ``{"done", "skipped",
     "failed"}`` lists of tasks.
@@ -180,7 +181,11 @@ def sweep(
     ``diagnostics_every``: record DENFAC's critic-fit diagnostics every that many episodes (0: none; None: the
     suite's, else none).
     ``device``: the torch device of every run (``"cuda"`` on a GPU machine; each worker its own process there).
+    ``checkpoint_every``: a run saves itself (``<results_dir>/checkpoints/``) after the first episode's update past
+    every that many seconds, and a rerun resumes it from there (0: no checkpoints; a killed run is then redone).
     """
+    if checkpoint_every < 0:
+        raise ValueError(f"checkpoint_every must be >= 0 seconds (0: none), got {checkpoint_every!r}")
     cells = select_cells(suite, algos, envs, seeds)
     if isinstance(episodes, int):
         episodes = {e: episodes for _, e, _ in cells}
@@ -216,6 +221,8 @@ def sweep(
             "eval_kwargs": dict(budget.eval_kwargs),
             "diagnostics_every": diagnostics_every,
             "device": device,
+            "checkpoint_dir": str(results_dir / "checkpoints") if checkpoint_every > 0 else None,
+            "checkpoint_every": checkpoint_every if checkpoint_every > 0 else None,
         }
         (status["skipped"] if (algo, env, int(seed), budget.episodes) in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
@@ -337,7 +344,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="record DENFAC's critic-fit diagnostics every N episodes (0: none; default: the suite's, else none)",
     )
     parser.add_argument("--device", default="cpu", help="torch device of the runs: cpu (default), or cuda on a GPU machine")
+    parser.add_argument(
+        "--checkpoint-every",
+        type=float,
+        default=600.0,
+        help="seconds between a run's checkpoints, from which a rerun resumes it (default 600; 0: none)",
+    )
     args = parser.parse_args(argv)
+    if args.checkpoint_every < 0:
+        parser.error(f"--checkpoint-every must be >= 0 seconds (0: none), got {args.checkpoint_every}")
     try:
         check_device(args.device)
         episodes = parse_episodes(args.episodes, args.envs)
@@ -360,6 +375,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         analysis=not args.no_analysis,
         diagnostics_every=args.diagnostics_every,
         device=args.device,
+        checkpoint_every=args.checkpoint_every,
     )
     print(f"finished: {len(status['done'])} done, {len(status['skipped'])} skipped, {len(status['failed'])} failed")
     return 1 if status["failed"] else 0

@@ -18,6 +18,7 @@ import io
 import json
 import os
 import platform
+import shutil
 import subprocess
 import time
 import traceback
@@ -72,7 +73,8 @@ class RunClock(BaseCallback):
         self.cpu_times: list[float] = []  # cumulative training CPU seconds at each episode end
         self.evaluations: list[dict[str, Any]] = []
         self._start = self._wall_start = 0.0
-        self.eval_cpu_time = 0.0
+        self.eval_cpu_time = 0.0  # this process's
+        self.offset = 0.0  # training CPU seconds of the processes before this one (a resumed run)
 
     def _on_training_start(self) -> None:
         self._start, self._wall_start = time.process_time(), time.perf_counter()
@@ -81,7 +83,7 @@ class RunClock(BaseCallback):
         for done in self.locals["dones"]:
             if not done:
                 continue
-            self.cpu_times.append(time.process_time() - self._start - self.eval_cpu_time)
+            self.cpu_times.append(time.process_time() - self._start - self.eval_cpu_time + self.offset)
             episode = len(self.cpu_times)
             if self.eval_env is not None and (episode % self.eval_every == 0 or episode == self.max_episodes):
                 before = time.process_time()
@@ -188,12 +190,104 @@ class DiagnosticsCallback(BaseCallback):
         self._last = episode
 
 
+class RunCheckpoint(BaseCallback):
+    """Save the run so far into ``folder`` at the first point after an episode's update once ``every`` seconds (wall)
+    have passed since the last save, so that a run killed with its sweep resumes there (:func:`load_checkpoint`).
+
+    A checkpoint is SB3's own files (``model.save``, ``save_replay_buffer``, ``VecNormalize.save``) and ``state.pkl``,
+    the run's records so far (``state()``). Each save writes new files, then replaces ``state.pkl`` (which names them),
+    then removes the old ones: a kill at any point leaves the previous checkpoint or the new one whole."""
+
+    def __init__(self, folder: Path, every: float, state: Any) -> None:
+        super().__init__()
+        self.folder, self.every, self.state = Path(folder), every, state
+        self._last, self._episode_ended, self.saves = time.perf_counter(), False, 0
+
+    def _on_step(self) -> bool:
+        self._episode_ended |= bool(any(self.locals["dones"]))
+        return True
+
+    def _on_rollout_start(self) -> None:  # after the update that followed the last rollout
+        if self._episode_ended and time.perf_counter() - self._last >= self.every:
+            self.save()
+        self._episode_ended = False
+
+    def save(self) -> None:
+        import pickle
+
+        from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        old = load_checkpoint(self.folder)
+        tag = f"{self.model.num_timesteps}"
+        files = {"model": f"model_{tag}.zip"}
+        self.model.save(self.folder / files["model"])
+        if isinstance(self.model, OffPolicyAlgorithm):
+            files["replay_buffer"] = f"replay_buffer_{tag}.pkl"
+            self.model.save_replay_buffer(self.folder / files["replay_buffer"])
+        if self.model.get_vec_normalize_env() is not None:
+            files["vec_normalize"] = f"vec_normalize_{tag}.pkl"
+            self.model.get_vec_normalize_env().save(str(self.folder / files["vec_normalize"]))
+        tmp = self.folder / "state.pkl.tmp"
+        tmp.write_bytes(pickle.dumps({**self.state(), "files": files}))
+        os.replace(tmp, self.folder / "state.pkl")
+        for name in (old or {}).get("files", {}).values():
+            if name not in files.values():
+                (self.folder / name).unlink(missing_ok=True)
+        self._last, self.saves = time.perf_counter(), self.saves + 1
+
+
+def load_checkpoint(folder: Path | None) -> dict[str, Any] | None:
+    """The state a :class:`RunCheckpoint` saved in ``folder`` (None: no checkpoint there)."""
+    import pickle
+
+    path = None if folder is None else Path(folder) / "state.pkl"
+    return pickle.loads(path.read_bytes()) if path is not None and path.exists() else None
+
+
+def checkpoint_folder(task: dict[str, Any]) -> Path | None:
+    """Where the run of ``task`` keeps its checkpoint: one folder per cell under ``task["checkpoint_dir"]``."""
+    if not task.get("checkpoint_dir"):
+        return None
+    return Path(task["checkpoint_dir"]) / f"{task['algo'].replace(':', '-')}_{task['env']}_{task['seed']}_{task['episodes']}"
+
+
 def columns(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
     """Per-episode records -> per-field columns (the store's compact form)."""
     return {field: [r.get(field) for r in records] for field in EPISODE_FIELDS}
 
 
 EPISODE_FIELDS = ("episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time", "cpu_time")
+
+
+def resume_model(model: Any, folder: Path, saved: dict[str, Any], device: str) -> Any:
+    """The checkpoint's model on the env ``model`` was built with (the same zoo wrappers), its replay buffer and
+    normalisation statistics loaded; its next episode starts from a reset (the saved run stopped at an episode end)."""
+    env = model.get_env()
+    files = saved["files"]
+    if "vec_normalize" in files:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        env = VecNormalize.load(str(folder / files["vec_normalize"]), model.get_vec_normalize_env().venv)
+    resumed = type(model).load(folder / files["model"], env=env, device=device)
+    if "replay_buffer" in files:
+        resumed.load_replay_buffer(folder / files["replay_buffer"])
+    resumed._last_obs = None  # learn() resets the env
+    return resumed
+
+
+def restore_callbacks(saved: dict[str, Any], performance: Any, clock: RunClock, steps: Any, diagnostics: Any) -> dict:
+    """Put a checkpoint's records back into the run's callbacks; return what the earlier processes spent."""
+    performance.records = list(saved["records"])
+    performance._start_time = time.perf_counter() - saved["wall_time"]  # episodes' wall times count on
+    clock.cpu_times, clock.evaluations = list(saved["cpu_times"]), list(saved["evaluations"])
+    clock.offset = saved["clock_cpu"]  # its training CPU up to the checkpoint, the update after its last episode too
+    steps.denfac_steps, steps._seen_updates = saved["denfac_steps"]
+    if diagnostics is not None and saved["diagnostics"] is not None:
+        diagnostics.diagnostics.rows = list(saved["diagnostics"])
+        diagnostics._last = len(saved["records"])
+    resumed = [*saved["resumed"], {"episodes": len(saved["records"]), "timesteps": saved["records"][-1]["timesteps"]}]
+    return {**{k: saved[k] for k in ("cpu_time", "wall_time", "eval_cpu_time", "git")}, "resumed": resumed}
 
 
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
@@ -222,6 +316,10 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             hyperparams, source = task["hyperparams"], task["hyperparams_source"]
             start, cpu_start = time.perf_counter(), time.process_time()
             model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device=device)
+            folder = checkpoint_folder(task)
+            saved = load_checkpoint(folder)
+            if saved is not None:  # a run killed with its sweep: go on from its last checkpoint
+                model = resume_model(model, folder, saved, device)
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
@@ -235,15 +333,42 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             if diagnose:
                 diagnostics = DiagnosticsCallback(task["diagnostics_every"], performance)
                 callbacks.append(diagnostics)
+            earlier = {"cpu_time": 0.0, "wall_time": 0.0, "eval_cpu_time": 0.0, "resumed": [], "git": None}
+            if saved is not None:
+                earlier = restore_callbacks(saved, performance, clock, steps, diagnostics if diagnose else None)
+
+            def state() -> dict[str, Any]:  # the run so far, for its checkpoint
+                return {
+                    "key": key,
+                    "cpu_time": time.process_time() - cpu_start - clock.eval_cpu_time + earlier["cpu_time"],
+                    "wall_time": time.perf_counter() - start + earlier["wall_time"],
+                    "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
+                    "records": performance.records,
+                    "cpu_times": clock.cpu_times,
+                    "clock_cpu": time.process_time() - clock._start - clock.eval_cpu_time + clock.offset,
+                    "evaluations": clock.evaluations,
+                    "denfac_steps": (steps.denfac_steps, steps._seen_updates),
+                    "diagnostics": diagnostics.diagnostics.rows if diagnose else None,
+                    "resumed": earlier["resumed"],
+                    "git": earlier["git"] or task.get("git"),
+                }
+
+            if folder is not None and task.get("checkpoint_every") is not None:
+                callbacks.append(RunCheckpoint(folder, task["checkpoint_every"], state))
             max_steps = gym.spec(facts.gym_id).max_episode_steps or 10_000
             # The step budget only guards against a run that never ends an episode; the episode budget stops training.
-            model.learn(total_timesteps=task["episodes"] * max_steps + 1, callback=CallbackList(callbacks))
-            wall_time, cpu_time = time.perf_counter() - start, time.process_time() - cpu_start - clock.eval_cpu_time
+            # A resumed run's learn() counts on from its saved steps to the same total.
+            total = task["episodes"] * max_steps + 1
+            model.learn(total - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=saved is None)
+            wall_time = time.perf_counter() - start + earlier["wall_time"]
+            cpu_time = time.process_time() - cpu_start - clock.eval_cpu_time + earlier["cpu_time"]
             model.get_env().close()
             if eval_env is not None:
                 eval_env.close()
     except Exception:
         return {**key, "status": "failed", "error": traceback.format_exc(), "log": log.getvalue(), "task": task}
+    if folder is not None and folder.exists():  # the run is whole: its record replaces the checkpoint
+        shutil.rmtree(folder, ignore_errors=True)
     episodes = performance.records[: task["episodes"]]
     for record, cpu in zip(episodes, clock.cpu_times, strict=False):
         record["cpu_time"] = cpu
@@ -259,12 +384,13 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "gradient_steps": steps.total(),
         "wall_time": wall_time,
         "cpu_time": cpu_time,
-        "eval_cpu_time": clock.eval_cpu_time,
+        "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
         "evaluations": clock.evaluations,
         "hyperparams_source": source,
         "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
         "lower_is_better": facts.lower_is_better,
-        "git": task.get("git") or git_state(),
+        "git": earlier["git"] or task.get("git") or git_state(),
+        **({"resumed": earlier["resumed"], "git_resumed": task.get("git")} if earlier["resumed"] else {}),
         "machine": machine_info(device),
         "load_average": {"start": load_start, "end": os.getloadavg()},
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),

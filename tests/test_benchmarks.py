@@ -502,3 +502,25 @@ def test_bootstrap_intervals_print_no_warning_per_call(monkeypatch):
         warnings.simplefilter("error")
         st.iqm_table(runs, ["pendulum"], "final_best")
         st.probability_of_improvement(runs, "x", "y", ["pendulum"], "final_best")
+
+
+def test_reports_name_the_runs_trained_on_a_gpu(tmp_path):
+    """A run's CPU seconds leave out a GPU's work: the report says which runs trained on one (old records: the CPU)."""
+    from benchmarks import analysis, store
+
+    def record(seed, machine):
+        n = 3
+        episodes = {"episode": [1, 2, 3], "performance": [-900.0, -500.0, -300.0], "best_so_far": [-900.0, -500.0, -300.0],
+                    "return": [-900.0, -500.0, -300.0], "length": [200] * n, "timesteps": [200, 400, 600],
+                    "cpu_time": [1.0, 2.0, 3.0], "wall_time": [1.0, 2.0, 3.0]}  # fmt: skip
+        return {"algo": "crossq", "env": "pendulum", "seed": seed, "episodes_requested": n, "status": "done",
+                "timesteps": 600, "cpu_time": 3.0, "episodes": episodes, **machine}  # fmt: skip
+
+    gpu = {"machine": {"device": "cuda", "gpu": "NVIDIA H200"}}
+    store.write_records(tmp_path, [record(0, {}), record(1, gpu), record(2, gpu), record(3, {"machine": {"device": "cpu"}})])
+    episodes, runs = analysis.load(tmp_path)
+    assert list(runs.sort_values("seed")["device"]) == ["cpu", "NVIDIA H200", "NVIDIA H200", "cpu"]
+    text = analysis.report("t", episodes, runs, tmp_path, "t")
+    assert "Trained on a GPU (their CPU seconds leave out the GPU's work): sb3-contrib CrossQ pendulum seeds 1, 2" in text
+    assert "(NVIDIA H200)" in text
+    assert "Trained on a GPU" not in analysis.report("t", episodes, runs[runs["device"] == "cpu"], tmp_path, "t")

@@ -105,3 +105,64 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path: Path) -> None:
     assert model._n_updates == int(saved["n_updates"]) + 2  # one update per new episode
     assert model._episode_num == int(saved["episode_num"]) + 2
     assert len(model.get_env().get_attr("episode_returns")[0]) == 2  # the continued run's episodes are recorded
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("algo", ["denfac_default", "td3"])
+def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path, algo: str) -> None:
+    """A benchmark run SIGKILLed with its sweep goes on, on the rerun, from its last checkpoint (episode records,
+    model, replay buffer, step and update counters) instead of from the start; its whole record matches an
+    uninterrupted run's counts."""
+    from benchmarks import run as runner
+    from benchmarks import store
+
+    episodes = 8
+    args = ["--algos", algo, "--envs", "pendulum", "--seeds", "0", "--episodes", str(episodes), "--workers", "0"]
+    args += ["--no-analysis", "--checkpoint-every", "0.001"]  # a checkpoint after every episode's update
+    killed, whole = tmp_path / "killed", tmp_path / "whole"
+    progress = tmp_path / "progress" / f"{algo}_pendulum_0.json"
+    env = {**os.environ, "BENCHMARK_PROGRESS_DIR": str(progress.parent), "OMP_NUM_THREADS": "1"}
+    progress.parent.mkdir()
+    repo = Path(__file__).resolve().parent.parent
+    child = subprocess.Popen(
+        [sys.executable, "-m", "benchmarks.run", *args, "--results", str(killed)], cwd=repo, env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 240
+        while not (progress.exists() and '"episodes": 4' in progress.read_text()):
+            assert child.poll() is None, child.stderr.read().decode()
+            assert time.monotonic() < deadline, "the run never reached its 4th episode"
+            time.sleep(0.05)
+    finally:
+        os.killpg(child.pid, signal.SIGKILL)
+        child.wait()
+    (folder,) = (killed / "checkpoints").iterdir()
+    from benchmarks.task import load_checkpoint
+
+    saved = load_checkpoint(folder)
+    assert saved is not None and 3 <= len(saved["records"]) < episodes
+    assert not store.read_runs(killed)  # the run had not finished
+    from benchmarks import suites
+    from benchmarks.task import resume_model
+    from sb3_denfac.zoo import make_model
+
+    fresh = make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", suites.load_hyperparams(algo, "pendulum")[0])
+    model = resume_model(fresh, folder, saved, "cpu")  # what the rerun trains on: the killed run's model and data
+    steps_then = saved["records"][-1]["timesteps"]
+    assert model.num_timesteps == model.replay_buffer.size() == steps_then and model._n_updates > 0
+
+    assert runner.main([*args, "--results", str(killed)]) == 0
+    assert runner.main([*args, "--results", str(whole), "--checkpoint-every", "0"]) == 0
+    (resumed,), (uninterrupted,) = store.read_runs(killed), store.read_runs(whole)
+    assert resumed["resumed"] == [{"episodes": len(saved["records"]), "timesteps": saved["records"][-1]["timesteps"]}]
+    assert "resumed" not in uninterrupted and not (whole / "checkpoints").exists()
+    assert not folder.exists()  # the finished run's record replaced its checkpoint
+    for field in ("n_episodes", "timesteps", "gradient_steps"):
+        assert resumed[field] == uninterrupted[field], field
+    n = len(saved["records"])
+    assert resumed["episodes"]["return"][:n] == [r["return"] for r in saved["records"]]  # the first process's episodes
+    assert resumed["episodes"]["timesteps"] == uninterrupted["episodes"]["timesteps"] == [200 * (i + 1) for i in range(8)]
+    cpu = resumed["episodes"]["cpu_time"]
+    assert all(b > a for a, b in zip(cpu, cpu[1:], strict=False)) and resumed["cpu_time"] > saved["cpu_time"]
+    assert [e["episode"] for e in resumed["evaluations"]] == [8]
