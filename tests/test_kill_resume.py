@@ -166,3 +166,29 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     cpu = resumed["episodes"]["cpu_time"]
     assert all(b > a for a, b in zip(cpu, cpu[1:], strict=False)) and resumed["cpu_time"] > saved["cpu_time"]
     assert [e["episode"] for e in resumed["evaluations"]] == [8]
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("algo", ["denfac", "nfac", "cacla", "cmaes", "ddpg", "sac", "crossq"])
+def test_every_benchmark_row_saves_and_resumes_its_run(tmp_path: Path, algo: str) -> None:
+    """Each algorithm of the sweep checkpoints after an episode's update and trains on from the checkpoint."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from benchmarks import suites
+    from benchmarks.task import RunCheckpoint, load_checkpoint, resume_model
+    from sb3_denfac.common.callbacks import EpisodePerformanceCallback
+    from sb3_denfac.zoo import make_model
+
+    hyperparams = {**suites.load_hyperparams(algo, "pendulum")[0], "learning_starts": 50}
+    if algo not in ("denfac", "ddpg", "sac", "crossq"):
+        hyperparams.pop("learning_starts")
+    build = lambda: make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", hyperparams, seed=0)  # noqa: E731
+    model, performance = build(), EpisodePerformanceCallback(max_episodes=2)
+    checkpoint = RunCheckpoint(tmp_path, 0.0, lambda: {"episodes": performance.n_episodes})
+    model.learn(10_000, callback=CallbackList([performance, checkpoint]))
+    saved = load_checkpoint(tmp_path)
+    assert checkpoint.saves >= 1 and saved["episodes"] == 1  # after episode 1's update (episode 2 ends the run)
+    resumed = resume_model(build(), tmp_path, saved, "cpu")
+    assert resumed.num_timesteps == 200
+    resumed.learn(400, callback=EpisodePerformanceCallback(max_episodes=1), reset_num_timesteps=False)
+    assert resumed.num_timesteps == 400
