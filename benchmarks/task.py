@@ -322,6 +322,10 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device=device)
             folder = checkpoint_folder(task)
             saved = load_checkpoint(folder)
+            settings = {k: repr(v) for k, v in hyperparams.items()}
+            if saved is not None and saved.get("hyperparams") != settings:  # the cell's settings changed since
+                print(f"checkpoint in {folder} ignored: it was made with other settings ({saved.get('hyperparams')})")
+                saved = None
             if saved is not None:  # a run killed with its sweep: go on from its last checkpoint
                 model = resume_model(model, folder, saved, device)
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
@@ -344,6 +348,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             def state() -> dict[str, Any]:  # the run so far, for its checkpoint
                 return {
                     "key": key,
+                    "hyperparams": settings,
                     "cpu_time": time.process_time() - cpu_start - clock.eval_cpu_time + earlier["cpu_time"],
                     "wall_time": time.perf_counter() - start + earlier["wall_time"],
                     "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
@@ -391,7 +396,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
         "evaluations": clock.evaluations,
         "hyperparams_source": source,
-        "hyperparams": {k: repr(v) for k, v in hyperparams.items()},
+        "hyperparams": settings,
         "lower_is_better": facts.lower_is_better,
         "git": earlier["git"] or task.get("git") or git_state(),
         **({"resumed": earlier["resumed"], "git_resumed": task.get("git")} if earlier["resumed"] else {}),

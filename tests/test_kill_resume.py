@@ -152,6 +152,17 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     steps_then = saved["records"][-1]["timesteps"]
     assert model.num_timesteps == model.replay_buffer.size() == steps_then and model._n_updates > 0
 
+    # the same checkpoint, made (it says) with other settings: ignored, the run starts afresh
+    import pickle
+    import shutil
+
+    other = tmp_path / "other"
+    shutil.copytree(killed / "checkpoints", other / "checkpoints")
+    state_file = other / "checkpoints" / folder.name / "state.pkl"
+    state_file.write_bytes(pickle.dumps({**saved, "hyperparams": {"learning_rate": "0.5"}}))
+    assert runner.main([*args, "--results", str(other)]) == 0
+    assert "resumed" not in store.read_runs(other)[0] and "other settings" in store.read_runs(other)[0]["log"]
+
     assert runner.main([*args, "--results", str(killed)]) == 0
     assert runner.main([*args, "--results", str(whole), "--checkpoint-every", "0"]) == 0
     (resumed,), (uninterrupted,) = store.read_runs(killed), store.read_runs(whole)
