@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import time
 from collections.abc import Callable, Sequence
@@ -255,6 +256,9 @@ def sweep(
             return
         finished.add(cell)
         status["done"].append(t)
+        # the run is in the runs file: its checkpoint (if any, on this machine) is done with
+        folder = task_module.checkpoint_folder({**t, "checkpoint_dir": results_dir / "checkpoints"})
+        shutil.rmtree(folder, ignore_errors=True)
         if zoo_logs is not None:
             write_zoo_evaluations(record, Path(zoo_logs))
         if verbose:

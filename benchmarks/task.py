@@ -73,8 +73,13 @@ class RunClock(BaseCallback):
         self.cpu_times: list[float] = []  # cumulative training CPU seconds at each episode end
         self.evaluations: list[dict[str, Any]] = []
         self._start = self._wall_start = 0.0
-        self.eval_cpu_time = 0.0  # this process's
-        self.offset = 0.0  # training CPU seconds of the processes before this one (a resumed run)
+        self.eval_cpu_time = 0.0  # this process's evaluations
+        self.checkpoint_cpu_time = 0.0  # this process's checkpoints (RunCheckpoint)
+        self.offset = self.wall_offset = 0.0  # training CPU and wall seconds of the processes before (a resumed run)
+
+    def training_cpu(self) -> float:
+        """Training CPU seconds so far, the earlier processes' included; evaluations and checkpoints left out."""
+        return time.process_time() - self._start - self.eval_cpu_time - self.checkpoint_cpu_time + self.offset
 
     def _on_training_start(self) -> None:
         self._start, self._wall_start = time.process_time(), time.perf_counter()
@@ -83,7 +88,7 @@ class RunClock(BaseCallback):
         for done in self.locals["dones"]:
             if not done:
                 continue
-            self.cpu_times.append(time.process_time() - self._start - self.eval_cpu_time + self.offset)
+            self.cpu_times.append(self.training_cpu())
             episode = len(self.cpu_times)
             if self.eval_env is not None and (episode % self.eval_every == 0 or episode == self.max_episodes):
                 before = time.process_time()
@@ -92,8 +97,11 @@ class RunClock(BaseCallback):
                 self.evaluations.append({"episode": episode, "scores": scores})
             if self.progress_path is not None:
                 progress = {"episodes": episode, "timesteps": self.num_timesteps, "cpu_time": self.cpu_times[-1]}
-                progress["wall_time"] = time.perf_counter() - self._wall_start
-                self.progress_path.write_text(json.dumps(progress))
+                progress["wall_time"] = time.perf_counter() - self._wall_start + self.wall_offset
+                self.progress_path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = self.progress_path.with_name(self.progress_path.name + ".tmp")
+                tmp.write_text(json.dumps(progress))
+                os.replace(tmp, self.progress_path)
         return True
 
 
@@ -198,22 +206,27 @@ class RunCheckpoint(BaseCallback):
     the run's records so far (``state()``). Each save writes new files, then replaces ``state.pkl`` (which names them),
     then removes the old ones: a kill at any point leaves the previous checkpoint or the new one whole."""
 
-    def __init__(self, folder: Path, every: float, state: Any) -> None:
+    def __init__(self, folder: Path, every: float, state: Any, clock: RunClock | None = None) -> None:
         super().__init__()
-        self.folder, self.every, self.state = Path(folder), every, state
+        self.folder, self.every, self.state, self.clock = Path(folder), every, state, clock
         self._last, self._episode_ended, self.saves = time.perf_counter(), False, 0
 
     def _on_step(self) -> bool:
-        self._episode_ended |= bool(any(self.locals["dones"]))
+        # the rollout's last step ended an episode (a rollout that stops mid-episode, CACLA's n_steps, is no point to
+        # resume from: the env restarts on a resume)
+        self._episode_ended = bool(all(self.locals["dones"]))
         return True
 
     def _on_rollout_start(self) -> None:  # after the update that followed the last rollout
         if self._episode_ended and time.perf_counter() - self._last >= self.every:
+            before = time.process_time()
             try:
                 self.save()
             except Exception as error:  # noqa: BLE001  (a run that cannot be saved still trains; it is redone if killed)
                 print(f"checkpoints off for this run: {type(error).__name__}: {error}")
                 self.every = float("inf")
+            if self.clock is not None:  # not training: left out of the run's CPU seconds, as evaluations are
+                self.clock.checkpoint_cpu_time += time.process_time() - before
         self._episode_ended = False
 
     def save(self) -> None:
@@ -222,7 +235,6 @@ class RunCheckpoint(BaseCallback):
         from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
         self.folder.mkdir(parents=True, exist_ok=True)
-        old = load_checkpoint(self.folder)
         tag = f"{self.model.num_timesteps}"
         files = {"model": f"model_{tag}.zip"}
         self.model.save(self.folder / files["model"])
@@ -235,9 +247,9 @@ class RunCheckpoint(BaseCallback):
         tmp = self.folder / "state.pkl.tmp"
         tmp.write_bytes(pickle.dumps({**self.state(), "files": files}))
         os.replace(tmp, self.folder / "state.pkl")
-        for name in (old or {}).get("files", {}).values():
-            if name not in files.values():
-                (self.folder / name).unlink(missing_ok=True)
+        for path in self.folder.iterdir():  # the last checkpoint's, and any left by a save a kill cut short
+            if path.name != "state.pkl" and path.name not in files.values():
+                path.unlink(missing_ok=True)
         self._last, self.saves = time.perf_counter(), self.saves + 1
 
 
@@ -276,6 +288,10 @@ def resume_model(model: Any, folder: Path, saved: dict[str, Any], device: str) -
     resumed = type(model).load(folder / files["model"], env=env, device=device)
     if "replay_buffer" in files:
         resumed.load_replay_buffer(folder / files["replay_buffer"])
+    # load() seeded everything with the run's seed again: the next episodes would replay the first ones' start states
+    # and noise. Each resume gets its own streams instead (not an uninterrupted run's, which are not saved).
+    if resumed.seed is not None:
+        resumed.set_random_seed(resumed.seed + 1_000_003 * (len(saved.get("resumed", [])) + 1))
     resumed._last_obs = None  # learn() resets the env
     return resumed
 
@@ -283,15 +299,36 @@ def resume_model(model: Any, folder: Path, saved: dict[str, Any], device: str) -
 def restore_callbacks(saved: dict[str, Any], performance: Any, clock: RunClock, steps: Any, diagnostics: Any) -> dict:
     """Put a checkpoint's records back into the run's callbacks; return what the earlier processes spent."""
     performance.records = list(saved["records"])
-    performance._start_time = time.perf_counter() - saved["wall_time"]  # episodes' wall times count on
+    performance._start_time = time.perf_counter() - saved["episodes_wall"]  # the episodes' wall times count on
     clock.cpu_times, clock.evaluations = list(saved["cpu_times"]), list(saved["evaluations"])
     clock.offset = saved["clock_cpu"]  # its training CPU up to the checkpoint, the update after its last episode too
+    clock.wall_offset = saved["episodes_wall"]
     steps.denfac_steps, steps._seen_updates = saved["denfac_steps"]
     if diagnostics is not None and saved["diagnostics"] is not None:
         diagnostics.diagnostics.rows = list(saved["diagnostics"])
         diagnostics._last = len(saved["records"])
-    resumed = [*saved["resumed"], {"episodes": len(saved["records"]), "timesteps": saved["records"][-1]["timesteps"]}]
+    last = saved["records"][-1]
+    resumed = [*saved["resumed"], {"episodes": len(saved["records"]), "timesteps": last["timesteps"], **saved["where"]}]
     return {**{k: saved[k] for k in ("cpu_time", "wall_time", "eval_cpu_time", "git")}, "resumed": resumed}
+
+
+def resume_or_start(model: Any, folder: Path | None, settings: dict[str, str], device: str) -> tuple[Any, dict | None]:
+    """``model`` resumed from the checkpoint in ``folder`` and its saved state, or ``(model, None)``: no checkpoint, or
+    one that was made with other settings or on another device, or that cannot be read (the run starts afresh, its
+    log says why, and the stale checkpoint is removed)."""
+    try:
+        saved = load_checkpoint(folder)
+        if saved is None:
+            return model, None
+        if (saved.get("hyperparams"), saved.get("device")) != (settings, device):
+            reason = f"it was made with other settings or on another device ({saved.get('device')})"
+        else:
+            return resume_model(model, folder, saved, device), saved
+    except Exception as error:  # noqa: BLE001  (a truncated file, a library that changed)
+        reason = f"it cannot be loaded: {type(error).__name__}: {error}"
+    print(f"checkpoint in {folder} ignored, the run starts afresh: {reason}")
+    shutil.rmtree(folder, ignore_errors=True)
+    return model, None
 
 
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
@@ -321,13 +358,8 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             start, cpu_start = time.perf_counter(), time.process_time()
             model = make_model(task["zoo_algo"], facts.gym_id, hyperparams, seed=task["seed"], device=device)
             folder = checkpoint_folder(task)
-            saved = load_checkpoint(folder)
             settings = {k: repr(v) for k, v in hyperparams.items()}
-            if saved is not None and saved.get("hyperparams") != settings:  # the cell's settings changed since
-                print(f"checkpoint in {folder} ignored: it was made with other settings ({saved.get('hyperparams')})")
-                saved = None
-            if saved is not None:  # a run killed with its sweep: go on from its last checkpoint
-                model = resume_model(model, folder, saved, device)
+            model, saved = resume_or_start(model, folder, settings, device)
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
@@ -342,6 +374,10 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
                 diagnostics = DiagnosticsCallback(task["diagnostics_every"], performance)
                 callbacks.append(diagnostics)
             earlier = {"cpu_time": 0.0, "wall_time": 0.0, "eval_cpu_time": 0.0, "resumed": [], "git": None}
+
+            def excluded() -> float:  # this process's CPU seconds that are not training
+                return clock.eval_cpu_time + clock.checkpoint_cpu_time
+
             if saved is not None:
                 earlier = restore_callbacks(saved, performance, clock, steps, diagnostics if diagnose else None)
 
@@ -349,12 +385,15 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
                 return {
                     "key": key,
                     "hyperparams": settings,
-                    "cpu_time": time.process_time() - cpu_start - clock.eval_cpu_time + earlier["cpu_time"],
+                    "device": device,
+                    "where": {"device": device, "host": platform.node()},
+                    "episodes_wall": time.perf_counter() - performance._start_time,
+                    "cpu_time": time.process_time() - cpu_start - excluded() + earlier["cpu_time"],
                     "wall_time": time.perf_counter() - start + earlier["wall_time"],
                     "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
                     "records": performance.records,
                     "cpu_times": clock.cpu_times,
-                    "clock_cpu": time.process_time() - clock._start - clock.eval_cpu_time + clock.offset,
+                    "clock_cpu": clock.training_cpu(),
                     "evaluations": clock.evaluations,
                     "denfac_steps": (steps.denfac_steps, steps._seen_updates),
                     "diagnostics": diagnostics.diagnostics.rows if diagnose else None,
@@ -363,21 +402,19 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
                 }
 
             if folder is not None and task.get("checkpoint_every") is not None:
-                callbacks.append(RunCheckpoint(folder, task["checkpoint_every"], state))
+                callbacks.append(RunCheckpoint(folder, task["checkpoint_every"], state, clock))
             max_steps = gym.spec(facts.gym_id).max_episode_steps or 10_000
             # The step budget only guards against a run that never ends an episode; the episode budget stops training.
             # A resumed run's learn() counts on from its saved steps to the same total.
             total = task["episodes"] * max_steps + 1
             model.learn(total - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=saved is None)
             wall_time = time.perf_counter() - start + earlier["wall_time"]
-            cpu_time = time.process_time() - cpu_start - clock.eval_cpu_time + earlier["cpu_time"]
+            cpu_time = time.process_time() - cpu_start - excluded() + earlier["cpu_time"]
             model.get_env().close()
             if eval_env is not None:
                 eval_env.close()
     except Exception:
         return {**key, "status": "failed", "error": traceback.format_exc(), "log": log.getvalue(), "task": task}
-    if folder is not None and folder.exists():  # the run is whole: its record replaces the checkpoint
-        shutil.rmtree(folder, ignore_errors=True)
     episodes = performance.records[: task["episodes"]]
     for record, cpu in zip(episodes, clock.cpu_times, strict=False):
         record["cpu_time"] = cpu
@@ -394,6 +431,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
         "wall_time": wall_time,
         "cpu_time": cpu_time,
         "eval_cpu_time": clock.eval_cpu_time + earlier["eval_cpu_time"],
+        "checkpoint_cpu_time": clock.checkpoint_cpu_time,
         "evaluations": clock.evaluations,
         "hyperparams_source": source,
         "hyperparams": settings,

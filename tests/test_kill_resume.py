@@ -166,7 +166,9 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     assert runner.main([*args, "--results", str(killed)]) == 0
     assert runner.main([*args, "--results", str(whole), "--checkpoint-every", "0"]) == 0
     (resumed,), (uninterrupted,) = store.read_runs(killed), store.read_runs(whole)
-    assert resumed["resumed"] == [{"episodes": len(saved["records"]), "timesteps": saved["records"][-1]["timesteps"]}]
+    (where,) = resumed["resumed"]
+    assert where["episodes"] == len(saved["records"]) and where["timesteps"] == saved["records"][-1]["timesteps"]
+    assert where["device"] == "cpu" and where["host"]
     assert "resumed" not in uninterrupted and not (whole / "checkpoints").exists()
     assert not folder.exists()  # the finished run's record replaced its checkpoint
     for field in ("n_episodes", "timesteps", "gradient_steps"):
@@ -174,8 +176,10 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     n = len(saved["records"])
     assert resumed["episodes"]["return"][:n] == [r["return"] for r in saved["records"]]  # the first process's episodes
     assert resumed["episodes"]["timesteps"] == uninterrupted["episodes"]["timesteps"] == [200 * (i + 1) for i in range(8)]
-    cpu = resumed["episodes"]["cpu_time"]
-    assert all(b > a for a, b in zip(cpu, cpu[1:], strict=False)) and resumed["cpu_time"] > saved["cpu_time"]
+    for clock in ("cpu_time", "wall_time"):  # counted on across the two processes
+        times = resumed["episodes"][clock]
+        assert all(b > a for a, b in zip(times, times[1:], strict=False)) and resumed[clock] > saved[clock], clock
+    assert resumed["checkpoint_cpu_time"] > 0 and "checkpoint_cpu_time" in uninterrupted
     assert [e["episode"] for e in resumed["evaluations"]] == [8]
 
 
