@@ -299,10 +299,10 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
     lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
     on_gpu = runs[runs["device"] != "cpu"]
     if not on_gpu.empty:  # their CPU seconds are not comparable with the others'
-        cells = [
-            f"{ALGOS[a].label if a in ALGOS else a} {e} seeds {', '.join(map(str, sorted(g['seed'])))} ({d})"
-            for (a, e, d), g in on_gpu.groupby(["algo", "env", "device"])
-        ]
+        cells = []
+        for (algo, env, device), group in on_gpu.groupby(["algo", "env", "device"]):
+            seeds = f"seed{'s' * (len(group) > 1)} {', '.join(map(str, sorted(group['seed'])))}"
+            cells.append(f"{ALGOS[algo].label if algo in ALGOS else algo} {env} {seeds} ({device})")
         lines += [f"Trained on a GPU (their CPU seconds leave out the GPU's work): {'; '.join(cells)}.", ""]
     plots.curves(episodes, envs, algos, out / f"{stem}.png")
     plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")

@@ -523,4 +523,6 @@ def test_reports_name_the_runs_trained_on_a_gpu(tmp_path):
     text = analysis.report("t", episodes, runs, tmp_path, "t")
     assert "Trained on a GPU (their CPU seconds leave out the GPU's work): sb3-contrib CrossQ pendulum seeds 1, 2" in text
     assert "(NVIDIA H200)" in text
+    one = analysis.report("t", episodes, runs[runs["seed"] != 2], tmp_path, "t")
+    assert "sb3-contrib CrossQ pendulum seed 1 (NVIDIA H200)" in one
     assert "Trained on a GPU" not in analysis.report("t", episodes, runs[runs["device"] == "cpu"], tmp_path, "t")
