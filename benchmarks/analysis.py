@@ -70,6 +70,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         eps.insert(0, "algo", meta["algo"])
         episode_frames.append(eps)
         facts = env_facts(meta["env"])
+        machine = meta.get("machine") or {}
         hits = eps.loc[eps["best_so_far"].map(facts.reached), "episode"]
         evaluations = meta.get("evaluations") or []
         run_rows.append(
@@ -97,7 +98,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "trained": bool(meta.get("timesteps", 0) > _learning_starts(meta) and len(eps) >= 2),
                 "hyperparams_source": meta.get("hyperparams_source", ""),
                 "commit": (meta.get("git") or {}).get("commit", "")[:10],
-                "device": (meta.get("machine") or {}).get("gpu") or (meta.get("machine") or {}).get("device", "cpu"),
+                "device": machine.get("gpu") or machine.get("device", "cpu"),
             }
         )
     episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame()

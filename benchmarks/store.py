@@ -63,8 +63,12 @@ def _members(raw: bytes) -> Iterator[tuple[bytes, int]]:
 def read_records(results_dir: str | Path) -> Iterator[dict[str, Any]]:
     """Every complete record in file order; a truncated or corrupt tail (a killed append) is skipped."""
     path = runs_path(results_dir)
-    if not path.exists():
-        return
+    if path.exists():
+        yield from _file_records(path)
+
+
+def _file_records(path: Path) -> Iterator[dict[str, Any]]:
+    """The complete records of one runs file, whatever its name."""
     for text, _ in _members(path.read_bytes()):
         for line in text.decode().splitlines():
             yield json.loads(line)
@@ -120,15 +124,11 @@ def merge(results_dir: str | Path, sources: list[str | Path]) -> list[Cell]:
         source = Path(source)
         if not source.exists():
             raise FileNotFoundError(f"no runs file at {source}")
-        folder, name = (source, RUNS_FILE) if source.is_dir() else (source.parent, source.name)
-        path = folder / name
-        for text, _ in _members(path.read_bytes()):
-            for line in text.decode().splitlines():
-                record = json.loads(line)
-                if record.get("status") == "done" and cell_of(record) not in held:
-                    append_record(results_dir, record)
-                    held.add(cell_of(record))
-                    added.append(cell_of(record))
+        for record in _file_records(runs_path(source) if source.is_dir() else source):
+            if record.get("status") == "done" and cell_of(record) not in held:
+                append_record(results_dir, record)
+                held.add(cell_of(record))
+                added.append(cell_of(record))
     return added
 
 

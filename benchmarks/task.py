@@ -98,11 +98,15 @@ class RunClock(BaseCallback):
             if self.progress_path is not None:
                 progress = {"episodes": episode, "timesteps": self.num_timesteps, "cpu_time": self.cpu_times[-1]}
                 progress["wall_time"] = time.perf_counter() - self._wall_start + self.wall_offset
-                self.progress_path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = self.progress_path.with_name(self.progress_path.name + ".tmp")
-                tmp.write_text(json.dumps(progress))
-                os.replace(tmp, self.progress_path)
+                replace_file(self.progress_path, json.dumps(progress).encode())
         return True
+
+
+def replace_file(path: Path, data: bytes) -> None:
+    """Write ``data`` aside, then rename it over ``path``: a reader or a kill never sees half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
 
 
 def git_state() -> dict[str, Any]:
@@ -244,9 +248,7 @@ class RunCheckpoint(BaseCallback):
         if self.model.get_vec_normalize_env() is not None:
             files["vec_normalize"] = f"vec_normalize_{tag}.pkl"
             self.model.get_vec_normalize_env().save(str(self.folder / files["vec_normalize"]))
-        tmp = self.folder / "state.pkl.tmp"
-        tmp.write_bytes(pickle.dumps({**self.state(), "files": files}))
-        os.replace(tmp, self.folder / "state.pkl")
+        replace_file(self.folder / "state.pkl", pickle.dumps({**self.state(), "files": files}))
         for path in self.folder.iterdir():  # the last checkpoint's, and any left by a save a kill cut short
             if path.name != "state.pkl" and path.name not in files.values():
                 path.unlink(missing_ok=True)
@@ -320,8 +322,9 @@ def resume_or_start(model: Any, folder: Path | None, settings: dict[str, str], d
         saved = load_checkpoint(folder)
         if saved is None:
             return model, None
-        if (saved.get("hyperparams"), saved.get("device")) != (settings, device):
-            reason = f"it was made with other settings or on another device ({saved.get('device')})"
+        made_on = saved.get("where", {}).get("device")
+        if (saved.get("hyperparams"), made_on) != (settings, device):
+            reason = f"it was made with other settings or on another device ({made_on})"
         else:
             return resume_model(model, folder, saved, device), saved
     except Exception as error:  # noqa: BLE001  (a truncated file, a library that changed)
@@ -366,6 +369,8 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             performance = EpisodePerformanceCallback(max_episodes=task["episodes"], lower_is_better=facts.lower_is_better)
             progress = os.environ.get("BENCHMARK_PROGRESS_DIR")
             progress_path = Path(progress) / f"{task['algo']}_{task['env']}_{task['seed']}.json" if progress else None
+            if progress_path is not None:
+                progress_path.parent.mkdir(parents=True, exist_ok=True)
             clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"], progress_path)
             steps = GradientSteps()
             callbacks = [performance, clock, steps]
@@ -385,7 +390,6 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
                 return {
                     "key": key,
                     "hyperparams": settings,
-                    "device": device,
                     "where": {"device": device, "host": platform.node()},
                     "episodes_wall": time.perf_counter() - performance._start_time,
                     "cpu_time": time.process_time() - cpu_start - excluded() + earlier["cpu_time"],
