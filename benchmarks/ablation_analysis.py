@@ -87,7 +87,17 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
                 row[f"last10@{k_ep}"] = float(score[max(0, k_ep - 10) : k_ep].mean())
         if r["diagnostics"]:
             d = r["diagnostics"][-1]
-            for k in ("fit_r2", "q_mc_corr", "q_mc_bias", "q_std", "mc_std", "iw_mean", "td_mse", "target_var"):
+            for k in (
+                "fit_r2",
+                "q_mc_corr",
+                "q_mc_bias",
+                "q_std",
+                "mc_std",
+                "iw_mean",
+                "td_mse",
+                "target_var",
+                "grad_sign_agreement",
+            ):
                 row[k] = d.get(k, np.nan)
             row["q_std/mc_std"] = d["q_std"] / d["mc_std"] if d.get("mc_std") else np.nan
         runs.append(row)

@@ -13,7 +13,12 @@ class Diagnostics:
     """Critic-fit measurements on the buffer after an update (eval mode, no gradient).
 
     Q is ``model.critic``, i.e. Q_1 with ``n_critics`` > 1, and so are the one-step targets y here: for several critics
-    ``fit_r2`` is Q_1's fit to its own one-step targets, not to the minimum the update fits it to."""
+    ``fit_r2`` is Q_1's fit to its own one-step targets, not to the minimum the update fits it to.
+
+    With two or more Q networks, ``grad_sign_agreement`` is the share of (transition, action dimension) pairs of D where
+    dQ_1/da and dQ_2/da have the same sign at the actor's action a = clip(pi(s), -1, 1): the direction eq. (5) ascends,
+    as a second critic fitted to the same targets on the same data reproduces it (0.5: chance; 1: always).
+    ``grad_sign_agreement_data`` is the same at the stored actions, where the data are."""
 
     def __init__(self, every: int = 5):
         self.every = every
@@ -67,6 +72,21 @@ class Diagnostics:
                 q_mc_bias=float((qnp - mc).mean()),
             )
             stats = getattr(model, "_last_update_stats", None)
-            if stats is not None and "weights" in stats:
-                row["iw_mean"] = float(stats["weights"].mean())
+        q_networks = getattr(model.critic, "q_networks", None)
+        if qf is None and q_networks is not None and len(q_networks) >= 2:
+            with th.no_grad():
+                own = model.actor(data.observations).clamp(-1, 1)
+            for key, actions in (("grad_sign_agreement", own), ("grad_sign_agreement_data", data.actions)):
+                row[key] = action_gradient_sign_agreement(model.critic, data.observations, actions)
+        if stats is not None and "weights" in stats:
+            row["iw_mean"] = float(stats["weights"].mean())
         self.rows.append(row)
+
+
+def action_gradient_sign_agreement(critic: Any, obs: th.Tensor, actions: th.Tensor) -> float:
+    """Share of (row, action dimension) pairs where dQ_1/da and dQ_2/da at ``actions`` have the same sign."""
+    a = actions.detach().clone().requires_grad_(True)
+    q1, q2 = critic.all_q(obs, a)[:2]
+    (g1,) = th.autograd.grad(q1.sum(), a, retain_graph=True)
+    (g2,) = th.autograd.grad(q2.sum(), a)
+    return float(((g1 * g2) > 0).float().mean())

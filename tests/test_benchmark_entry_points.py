@@ -15,6 +15,7 @@ from benchmarks import (
     acrobot_horizon,
     analysis,
     cost,
+    diagnostics,
     stats,
     store,
     throughput,
@@ -68,8 +69,27 @@ def test_diagnostics_outside_a_suite(tmp_path):
                         "--no-analysis"]) == 0  # fmt: skip
     (record,) = store.read_runs(tmp_path)
     assert [d["episode"] for d in record["diagnostics"]] == [2] and record["diagnostics"][0]["n"] == 2 * 200
+    assert 0.0 <= record["diagnostics"][0]["grad_sign_agreement"] <= 1.0  # the default's two critics
     with pytest.raises(ValueError, match="diagnostics_every must be an int >= 0"):
         runner.sweep(["abl:default05"], ["Pendulum-v1"], [1], 1, results_dir=tmp_path, diagnostics_every=-1)
+
+
+def test_action_gradient_sign_agreement_of_two_critics():
+    # 1 where Q_2 is Q_1, 0 where Q_2 = -Q_1, about 1/2 for two independent random critics
+    from sb3_denfac import DENFAC
+
+    model = DENFAC("MlpPolicy", "Pendulum-v1", seed=0)
+    critic = model.critic
+    obs, actions = torch.randn(512, 3), torch.rand(512, 1) * 2 - 1
+    independent = diagnostics.action_gradient_sign_agreement(critic, obs, actions)
+    assert 0.1 < independent < 0.9
+    twin = critic.twin_qfs[0]
+    twin.load_state_dict(critic.qf.state_dict())
+    assert diagnostics.action_gradient_sign_agreement(critic, obs, actions) == 1.0
+    with torch.no_grad():
+        twin[-1].weight.neg_()
+        twin[-1].bias.neg_()
+    assert diagnostics.action_gradient_sign_agreement(critic, obs, actions) == 0.0
 
 
 def test_cost_measures_and_plans(tmp_path):
