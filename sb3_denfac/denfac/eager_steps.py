@@ -219,16 +219,23 @@ def _adam_step_public(net, grad: th.Tensor) -> None:
     net.flat.addcdiv_(net.exp_avg, denom, value=-net.lr / (1.0 - beta1**t))
 
 
-def critic_step(net, ws: Workspace, x, fixed: FixedStats | None, q_targets, scaled_weights, max_grad_norm, want_loss: bool):
-    """One Adam step on 1/N sum_n c_n (Q(s_n, a_n) - q_n)^2 (Algorithm 1, critic fit); ``scaled_weights`` = 2 c / N.
-
-    Returns the loss before the step if ``want_loss`` (only the last step's is logged), else None.
-    """
+def step_forward(net, ws: Workspace, x, fixed: FixedStats | None) -> list:
+    """The forward half of a training step (critic or actor): the network's output in train mode into
+    ``ws.outputs[-1]``, its running statistics updated; returns what :func:`backward` needs."""
     factors = net.advance()
     folds = forward_train(net, ws, x, fixed)
     update_running_stats(net, folds, x.shape[1], factors, skip_first=fixed is not None)
     if fixed is not None:
         fixed.step(factors[0])
+    return folds
+
+
+def critic_step(net, ws: Workspace, x, fixed: FixedStats | None, q_targets, scaled_weights, max_grad_norm, want_loss: bool):
+    """One Adam step on 1/N sum_n c_n (Q(s_n, a_n) - q_n)^2 (Algorithm 1, critic fit); ``scaled_weights`` = 2 c / N.
+
+    Returns the loss before the step if ``want_loss`` (only the last step's is logged), else None.
+    """
+    folds = step_forward(net, ws, x, fixed)
     diff = ws.outputs[-1].sub_(q_targets)  # the output buffer is not read again
     loss = th.dot(diff[0], diff[0] * scaled_weights[0]) * 0.5 if want_loss else None
     backward(net, ws, x, folds, diff.mul_(scaled_weights))
@@ -308,11 +315,7 @@ def actor_step(
     a_n = the (inverted) ascent direction d(1/N sum Q)/dpi_n = g_n / N, so a_n / sum ||a|| = g_n / (N S).
     Returns the objective (mean Q, without the penalty) before the step if ``want_objective``, else None.
     """
-    factors = net.advance()
-    folds = forward_train(net, ws, obs, fixed)
-    update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
-    if fixed is not None:
-        fixed.step(factors[0])
+    folds = step_forward(net, ws, obs, fixed)
     pi = ws.outputs[-1]
     ascent, objective = critic.action_gradient(pi, want_objective)
     if inverting:

@@ -65,11 +65,7 @@ def fit_actor(self, obs, batches=None):
 
 def actor_step(net, ws, obs, fixed, critic, max_grad_norm, inverting, want_objective, proximal=None):
     """``eager_steps.actor_step`` with the agreement weights r_n (module docstring) on the normalised ascent."""
-    factors = net.advance()
-    folds = eager_steps.forward_train(net, ws, obs, fixed)
-    eager_steps.update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
-    if fixed is not None:
-        fixed.step(factors[0])
+    folds = eager_steps.step_forward(net, ws, obs, fixed)
     pi = ws.outputs[-1]
     ascent, objective = critic.action_gradient(pi, want_objective)
     g2, _ = critic.twin.action_gradient(pi, False)

@@ -23,11 +23,7 @@ _state: dict[str, float] = {}
 
 def actor_step(net, ws, obs, fixed, critic, max_grad_norm, inverting, want_objective, proximal=None):
     """``eager_steps.actor_step`` with the running scale (one run at a time in this process)."""
-    factors = net.advance()
-    folds = eager_steps.forward_train(net, ws, obs, fixed)
-    eager_steps.update_running_stats(net, folds, obs.shape[1], factors, skip_first=fixed is not None)
-    if fixed is not None:
-        fixed.step(factors[0])
+    folds = eager_steps.step_forward(net, ws, obs, fixed)
     pi = ws.outputs[-1]
     ascent, objective = critic.action_gradient(pi, want_objective)
     if inverting:
