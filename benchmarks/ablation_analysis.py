@@ -97,6 +97,7 @@ def load(results: Path, upto: int | None = None) -> tuple[pd.DataFrame, pd.DataF
                 "td_mse",
                 "target_var",
                 "grad_sign_agreement",
+                "grad_sign_agreement_data",
             ):
                 row[k] = d.get(k, np.nan)
             row["q_std/mc_std"] = d["q_std"] / d["mc_std"] if d.get("mc_std") else np.nan

@@ -72,8 +72,7 @@ class Diagnostics:
                 q_mc_bias=float((qnp - mc).mean()),
             )
             stats = getattr(model, "_last_update_stats", None)
-        q_networks = getattr(model.critic, "q_networks", None)
-        if qf is None and q_networks is not None and len(q_networks) >= 2:
+        if qf is None and hasattr(model.critic, "all_q") and len(model.critic.q_networks) >= 2:  # DENFAC's critics
             with th.no_grad():
                 own = model.actor(data.observations).clamp(-1, 1)
             for key, actions in (("grad_sign_agreement", own), ("grad_sign_agreement_data", data.actions)):
@@ -83,10 +82,22 @@ class Diagnostics:
         self.rows.append(row)
 
 
-def action_gradient_sign_agreement(critic: Any, obs: th.Tensor, actions: th.Tensor) -> float:
-    """Share of (row, action dimension) pairs where dQ_1/da and dQ_2/da at ``actions`` have the same sign."""
-    a = actions.detach().clone().requires_grad_(True)
-    q1, q2 = critic.all_q(obs, a)[:2]
-    (g1,) = th.autograd.grad(q1.sum(), a, retain_graph=True)
-    (g2,) = th.autograd.grad(q2.sum(), a)
-    return float(((g1 * g2) > 0).float().mean())
+def action_gradient_sign_agreement(critic: Any, obs: th.Tensor, actions: th.Tensor, chunk: int = 16_384) -> float:
+    """Share of (row, action dimension) pairs where dQ_1/da and dQ_2/da at ``actions`` have the same (non-zero) sign;
+    rows in chunks (one chunk's graph at a time), the critic's parameters untouched."""
+    q1_net, q2_net = critic.q_networks[:2]
+    agree, total = 0, 0
+    wanted = [p.requires_grad for p in critic.parameters()]
+    critic.requires_grad_(False)
+    try:
+        for start in range(0, obs.shape[0], chunk):
+            a = actions[start : start + chunk].detach().clone().requires_grad_(True)
+            inputs = critic.q_inputs(obs[start : start + chunk], a)
+            (g1,) = th.autograd.grad(q1_net(inputs).sum(), a, retain_graph=True)
+            (g2,) = th.autograd.grad(q2_net(inputs).sum(), a)
+            agree += int((g1.sign() * g2.sign() > 0).sum())
+            total += g1.numel()
+    finally:
+        for p, flag in zip(critic.parameters(), wanted, strict=True):
+            p.requires_grad_(flag)
+    return agree / total

@@ -69,20 +69,23 @@ def test_diagnostics_outside_a_suite(tmp_path):
                         "--no-analysis"]) == 0  # fmt: skip
     (record,) = store.read_runs(tmp_path)
     assert [d["episode"] for d in record["diagnostics"]] == [2] and record["diagnostics"][0]["n"] == 2 * 200
-    assert 0.0 <= record["diagnostics"][0]["grad_sign_agreement"] <= 1.0  # the default's two critics
+    assert all(0.0 <= record["diagnostics"][0][key] <= 1.0 for key in ("grad_sign_agreement", "grad_sign_agreement_data"))
     with pytest.raises(ValueError, match="diagnostics_every must be an int >= 0"):
         runner.sweep(["abl:default05"], ["Pendulum-v1"], [1], 1, results_dir=tmp_path, diagnostics_every=-1)
 
 
 def test_action_gradient_sign_agreement_of_two_critics():
-    # 1 where Q_2 is Q_1, 0 where Q_2 = -Q_1, about 1/2 for two independent random critics
+    # 1 where Q_2 is Q_1, 0 where Q_2 = -Q_1, in between for two independently initialised critics; by chunks of rows
     from sb3_denfac import DENFAC
 
     model = DENFAC("MlpPolicy", "Pendulum-v1", seed=0)
     critic = model.critic
+    critic.set_training_mode(False)
     obs, actions = torch.randn(512, 3), torch.rand(512, 1) * 2 - 1
     independent = diagnostics.action_gradient_sign_agreement(critic, obs, actions)
-    assert 0.1 < independent < 0.9
+    assert 0.0 < independent < 1.0
+    assert diagnostics.action_gradient_sign_agreement(critic, obs, actions, chunk=100) == independent
+    assert all(p.grad is None and p.requires_grad for p in critic.parameters())  # the critic is left as it was
     twin = critic.twin_qfs[0]
     twin.load_state_dict(critic.qf.state_dict())
     assert diagnostics.action_gradient_sign_agreement(critic, obs, actions) == 1.0
