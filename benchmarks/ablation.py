@@ -53,6 +53,10 @@ GOOD: dict[str, Any] = dict(
     weighting="none",
     bootstrap_on_timeout=True,
     actor_proximal=0.0,  # the 0.2 library default; the 0.3 default is `default+proximal`
+    # The targets of 0.2-0.4 (0.5 made the library default the critics' mean at a smoothed next action:
+    # `default04+mean+smooth`, i.e. `default05`): pinned, so that these rows keep the meaning their runs were made with
+    target_policy_noise=0.0,
+    critic_target="min",
     policy_kwargs=dict(net_arch=dict(pi=[64, 64], qf=[64, 64]), batch_norm=False, init="default", n_critics=1),
 )
 

@@ -180,6 +180,23 @@ def test_ablation_configurations_take_the_papers_settings_from_one_place():
     assert suites.load_hyperparams("abl:good+vecnorm", "pendulum")[0]["normalize"] is True
 
 
+def test_ablation_rows_keep_their_meaning_when_the_library_default_changes():
+    """The rows named after an earlier default (0.2's ``good``, 0.4's ``default04``) pin the settings a later default
+    changed, so that a rerun is the configuration of their recorded runs; ``default05`` is 0.5's (today's) default."""
+    from sb3_denfac.denfac import DENFAC
+
+    def settings(row):
+        model = DENFAC(env="Pendulum-v1", **suites.load_hyperparams(row, "pendulum")[0])
+        return model.critic_target, model.target_policy_noise, model.actor_proximal, model.policy_kwargs["n_critics"]
+
+    assert settings("abl:good") == ("min", 0.0, 0.0, 1)
+    assert settings("abl:default04") == ("min", 0.0, 1.0, 2)
+    assert settings("abl:default04+smooth") == ("min", 0.2, 1.0, 2)
+    assert settings("abl:default04+mean") == ("mean", 0.0, 1.0, 2)
+    default = DENFAC("MlpPolicy", "Pendulum-v1")
+    assert settings("abl:default05") == (default.critic_target, default.target_policy_noise, default.actor_proximal, 2)
+
+
 @pytest.mark.parametrize("algo", ["td3", "sac", "crossq", "ddpg", "sac_matched", "td3_matched", "sac_utd20"])
 def test_peers_train_within_the_first_episode(algo):
     """learning_starts is at most one (full-length) episode on every env of every suite the peer is in; DDPG keeps its
