@@ -17,7 +17,8 @@ Adam at 1e-3, gradient norms clipped at 10.
   target entropy -dim(A), alpha starts at 1, SB3's ``ent_coef="auto"``).
 - The targets of eq. (4) are soft, q = r + gamma (1 - d) (Qbar(s', a') - alpha log pi(a'|s')), a' ~ pi(.|s') drawn
   anew at every fitted iteration (in place of TD3's smoothing noise), with Qbar the two critics' mean (the default's
-  ``critic_target``).
+  ``critic_target``); with ``bootstrap_bounds`` (``abl:default05+bounds``) Qbar is clipped to the bounds of
+  ``sb3_denfac.denfac.options`` before the entropy term.
 
 The critic's steps are the library's (the autograd updater: the fast one keeps the critic outside the modules until
 the update ends). Runs ``benchmarks.run`` in this process with the patch (use ``--workers 0 --checkpoint-every 0``: the
@@ -44,6 +45,7 @@ from torch.nn.utils import clip_grad_norm_
 
 from benchmarks import run
 from sb3_denfac.denfac.denfac import DENFAC
+from sb3_denfac.denfac.options import bootstrap_range
 from sb3_denfac.denfac.policies import combine_critics
 from sb3_denfac.denfac.updaters import FitSettings, make_updater
 
@@ -162,6 +164,7 @@ def update(self, n_iterations: int | None = None) -> None:
     terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
     settings = dataclasses.replace(FitSettings.of(self), actor_proximal=0.0)
     updater = make_updater(self.policy, settings, "plain").updater
+    bounds = bootstrap_range(rewards, self.gamma) if self.bootstrap_bounds else None
     critic_loss, objective, entropy = th.zeros(()), 0.0, 0.0
     for _ in range(n_iterations):
         sample = updater.iteration_sample(obs.shape[0])
@@ -170,7 +173,10 @@ def update(self, n_iterations: int | None = None) -> None:
         with th.no_grad():
             self.actor.set_training_mode(False)
             next_actions, next_log_prob = self.actor.sample(o2)
-            next_q = updater.critic(o2, next_actions) - self.log_alpha.exp() * next_log_prob
+            next_q = updater.critic(o2, next_actions)
+            if bounds is not None:  # ``bootstrap_bounds``: Qbar clipped to what D's rewards allow (options.py)
+                next_q = next_q.clamp(*bounds)
+            next_q = next_q - self.log_alpha.exp() * next_log_prob
             q_targets = r + self.gamma * (1.0 - done) * next_q
         weights = th.ones_like(q_targets)
         critic_loss = updater.fit_critic(o, a, q_targets, weights, None if sample is None else sample.critic_batches)
