@@ -14,7 +14,7 @@ Adam at 1e-3, gradient norms clipped at 10.
 - Each actor step minimises 1/B sum alpha log pi(a_i|s_i) - Q(s_i, a_i) with a_i reparameterised (eq. 7 of SAC;
   Q = Q_1, the critic DENFAC's actor ascends, or ``SA_Q=min`` / ``mean`` of the two), with no proximal term and no
   normalisation of the gradient; then one Adam step of log alpha on -log alpha (log pi + target entropy) (eq. 18;
-  target entropy -dim(A), alpha starts at 1, SB3's ``ent_coef="auto"``).
+  target entropy -dim(A), ``SA_ENTROPY=k`` for -k dim(A); alpha starts at 1, SB3's ``ent_coef="auto"``).
 - The targets of eq. (4) are soft, q = r + gamma (1 - d) (Qbar(s', a') - alpha log pi(a'|s')), a' ~ pi(.|s') drawn
   anew at every fitted iteration (in place of TD3's smoothing noise), with Qbar the two critics' mean (the default's
   ``critic_target``); with ``bootstrap_bounds`` (``abl:default05+bounds``) Qbar is clipped to the bounds of
@@ -50,6 +50,7 @@ from sb3_denfac.denfac.policies import combine_critics
 from sb3_denfac.denfac.updaters import FitSettings, make_updater
 
 ACTOR_Q = os.environ.get("SA_Q", "q1")  # what the actor ascends: "q1" (DENFAC's), "min" (SAC's) or "mean"
+ENTROPY_SCALE = float(os.environ.get("SA_ENTROPY", "1"))  # target entropy -SA_ENTROPY x dim(A) (SAC: 1)
 STATS = Path(os.environ.get("SA_STATS", "benchmarks/results/ablation/prototypes/soft_actor/alpha"))
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 
@@ -105,7 +106,7 @@ def setup_model(self) -> None:
     self._create_aliases()
     self.log_alpha = th.zeros(1, device=self.device, requires_grad=True)
     self.alpha_optimizer = th.optim.Adam([self.log_alpha], lr=actor.optimizer.param_groups[0]["lr"])
-    self.target_entropy = -float(np.prod(self.action_space.shape))
+    self.target_entropy = -ENTROPY_SCALE * float(np.prod(self.action_space.shape))
 
 
 def sample_action(self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1):
