@@ -28,12 +28,10 @@ class Diagnostics:
         rb = model.replay_buffer
         data = rb.all_samples(env=model._vec_normalize_env)
         model.policy.set_training_mode(False)
-        qf = getattr(model, "_q", None)
-        qfun = (lambda o, a: qf(model.critic, o, a)) if qf is not None else model.critic
         with th.no_grad():
-            q = qfun(data.observations, data.actions).squeeze(1)
+            q = model.critic(data.observations, data.actions).squeeze(1)
             na = model.actor(data.next_observations).clamp(-1, 1)
-            qn = qfun(data.next_observations, na).squeeze(1)
+            qn = model.critic(data.next_observations, na).squeeze(1)
             term = data.dones.squeeze(1)
             if not model.bootstrap_on_timeout:
                 term = th.clamp(term + data.timeouts.squeeze(1), max=1.0)
@@ -72,7 +70,7 @@ class Diagnostics:
                 q_mc_bias=float((qnp - mc).mean()),
             )
             stats = getattr(model, "_last_update_stats", None)
-        if qf is None and hasattr(model.critic, "all_q") and len(model.critic.q_networks) >= 2:  # DENFAC's critics
+        if hasattr(model.critic, "all_q") and len(model.critic.q_networks) >= 2:  # DENFAC's critics
             with th.no_grad():
                 own = model.actor(data.observations).clamp(-1, 1)
             for key, actions in (("grad_sign_agreement", own), ("grad_sign_agreement_data", data.actions)):

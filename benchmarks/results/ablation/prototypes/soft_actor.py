@@ -55,6 +55,7 @@ STATS = Path(os.environ.get("SA_STATS", "benchmarks/results/ablation/prototypes/
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 
 _setup_model = DENFAC._setup_model
+_sample_action = DENFAC._sample_action
 
 
 class SoftActor(nn.Module):
@@ -110,17 +111,14 @@ def setup_model(self) -> None:
 
 
 def sample_action(self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1):
-    if self.num_timesteps < learning_starts:
-        unscaled = np.array([self.action_space.sample() for _ in range(n_envs)])
-        buffer_action = self.policy.scale_action(unscaled).astype(np.float32)
-        self._last_behaviour_mean = np.full_like(buffer_action, np.nan)
-    else:
-        self.policy.set_training_mode(False)
-        obs, _ = self.policy.obs_to_tensor(self._last_obs)
-        with th.no_grad():
-            action, _ = self.actor.sample(obs)
-            self._last_behaviour_mean = self.actor(obs).cpu().numpy().astype(np.float32)
-        buffer_action = action.cpu().numpy().astype(np.float32)
+    if self.num_timesteps < learning_starts:  # the library's uniform warm-up (NaN behaviour means)
+        return _sample_action(self, learning_starts, action_noise, n_envs)
+    self.policy.set_training_mode(False)
+    obs, _ = self.policy.obs_to_tensor(self._last_obs)
+    with th.no_grad():
+        action, _ = self.actor.sample(obs)
+        self._last_behaviour_mean = self.actor(obs).cpu().numpy().astype(np.float32)
+    buffer_action = action.cpu().numpy().astype(np.float32)
     return self.policy.unscale_action(buffer_action), buffer_action
 
 
