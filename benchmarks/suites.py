@@ -65,6 +65,16 @@ ALGOS: dict[str, Algo] = {
             base="denfac_default",
             overrides=(("critic_target", "min"), ("target_policy_noise", 0.0)),
         ),  # fmt: skip
+        # DENFAC's soft actor option (ent_coef): SAC's squashed Gaussian actor and soft targets inside the fitted
+        # iterations, with the targets' bootstrap value bounded (bootstrap_bounds; ablation README, section 23)
+        Algo(
+            "denfac_soft",
+            "denfac",
+            "DENFAC, soft actor",
+            "paper",
+            base="denfac_default",
+            overrides=(("ent_coef", "auto"), ("bootstrap_bounds", True)),
+        ),  # fmt: skip
         Algo("nfac", "nfac", "NFAC+", "paper"),
         Algo("cacla", "cacla", "CACLA+", "paper"),
         Algo("cmaes", "cmaes", "CMA-ES", "paper"),
@@ -183,9 +193,15 @@ SUITES: dict[str, Suite] = {
         Suite(
             "matched",
             MATCHED_ENVS,
-            ((("denfac_default", "denfac_default04", "denfac", "sac", "sac_matched", "td3_matched"), _FIVE),),
-            "the default DENFAC against SB3's SAC and TD3 given DENFAC's schedule (train at every episode end, as many "
-            "critic steps as DENFAC) and SAC at one step per env step; equal episodes, gradient steps and CPU reported",
+            (
+                (
+                    ("denfac_default", "denfac_default04", "denfac_soft", "denfac", "sac", "sac_matched", "td3_matched"),
+                    _FIVE,
+                ),
+            ),  # fmt: skip
+            "the default DENFAC (and its soft-actor option) against SB3's SAC and TD3 given DENFAC's schedule (train at "
+            "every episode end, as many critic steps as DENFAC) and SAC at one step per env step; equal episodes, "
+            "gradient steps and CPU reported",
         ),
         Suite(
             "diagnosis",

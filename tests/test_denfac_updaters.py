@@ -69,6 +69,15 @@ class MultiActionEnv(gym.Env):
             reset_actor=False,
             policy_kwargs=dict(net_arch=dict(pi=[8, 6], qf=[16, 4]), batch_norm=False, init="default"),
         ),
+        # the soft actor (ent_coef): fast critic steps, the actor and alpha on autograd in both, on the same draws
+        dict(
+            ent_coef="auto",
+            weighting="none",
+            batch_size=32,
+            reset_actor=False,
+            adam_betas=(0.9, 0.999),
+            policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), batch_norm=False, init="default"),
+        ),
     ],
 )
 def test_fast_and_plain_paths_agree(make_denfac, kwargs):

@@ -95,6 +95,7 @@ def denfac_attributes_of_old_files(model: Any) -> None:
     model.target_policy_noise, model.target_noise_clip = 0.0, 0.5  # 0.4 and earlier: deterministic next actions
     model.critic_target = "min"  # 0.4 (n_critics 2) took the minimum
     model.bootstrap_bounds = False  # 0.5 and earlier: no bound
+    model.ent_coef, model.target_entropy = None, "auto"  # 0.5 and earlier: the deterministic actor only
 
 
 def record_policy_defaults(policy_kwargs: dict[str, Any], policy_class: type, default_net_arch: dict[str, Any]) -> None:

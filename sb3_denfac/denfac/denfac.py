@@ -12,6 +12,7 @@ from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import update_learning_rate
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
@@ -38,7 +39,7 @@ from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.options import bootstrap_range, check_options, fitted_iterations
-from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, parse_ent_coef
 from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
@@ -113,6 +114,14 @@ class DENFAC(
         their average) or "min" (clipped double Q, 0.4's default)
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
         (:mod:`~.options`; default False, paper: no bound)
+    :param ent_coef: None (default): the deterministic actor mu(s) of eq. (5), exploring with the truncated Gaussian of
+        ``sigma``. Set: the soft actor, SB3 SAC's squashed Gaussian pi(a|s) (:class:`~.policies.DENFACSoftActor`), played
+        as sampled, fitted at every fitted iteration by G steps of SAC's alpha log pi(a|s) - min_j Q_j(s, a) (no
+        proximal term), and soft targets in eq. (4), r + gamma (Q(s', a') - alpha log pi(a'|s')) with a' ~ pi(.|s')
+        (Haarnoja et al. 2018, eqs. 3, 7); alpha is SAC's ``ent_coef``: "auto" (tuned towards ``target_entropy``, from
+        1), "auto_<x>" (tuned, from x) or a float (fixed). Needs ``weighting="none"`` and no batch norm; ``sigma``,
+        ``inverting_gradients``, ``actor_proximal`` and ``target_policy_noise`` are the deterministic actor's
+    :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18; "auto": -dim(A))
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -167,6 +176,8 @@ class DENFAC(
         target_noise_clip: float = 0.5,
         critic_target: str = "mean",
         bootstrap_bounds: bool = False,
+        ent_coef: str | float | None = None,
+        target_entropy: str | float = "auto",
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -195,6 +206,16 @@ class DENFAC(
         self.target_noise_clip = check_number("target_noise_clip", target_noise_clip, minimum=0.0)
         self.critic_target = check_choice("critic_target", critic_target, CRITIC_TARGETS)
         self.bootstrap_bounds = check_bool("bootstrap_bounds", bootstrap_bounds)
+        self.ent_coef, self.target_entropy = ent_coef, target_entropy
+        if ent_coef is not None:
+            parse_ent_coef(ent_coef)  # a ValueError naming the accepted values
+            if weighting != "none":
+                raise ValueError(
+                    f"weighting={weighting!r} weighs by the truncated Gaussian of the deterministic actor; the soft actor "
+                    "(ent_coef set) needs weighting='none'"
+                )
+            if prioritized == "both":
+                raise ValueError("prioritized='both' is not implemented for the soft actor (ent_coef set): use 'critic'")
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -259,6 +280,8 @@ class DENFAC(
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
             raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
         self.policy_kwargs["sigma"] = self.sigma
+        if self.ent_coef is not None:  # the soft actor (files saved before ent_coef existed: the deterministic one)
+            self.policy_kwargs.update(soft_actor=True, ent_coef=self.ent_coef, target_entropy=self.target_entropy)
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
         if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
             optimizer_kwargs.setdefault("betas", self.adam_betas)
@@ -279,7 +302,15 @@ class DENFAC(
     ) -> tuple[np.ndarray, np.ndarray]:
         if action_noise is not None:
             raise ValueError("DENFAC explores with its truncated Gaussian (sigma); action_noise is not supported")
-        return super()._sample_action(learning_starts, None, n_envs)
+        if not self.policy.soft_actor or self.num_timesteps < learning_starts:
+            return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
+        # the soft actor: a ~ pi(.|s); D's behaviour mean is its deterministic action tanh(m(s))
+        self.policy.set_training_mode(False)
+        obs, _ = self.policy.obs_to_tensor(self._last_obs)
+        with th.no_grad():
+            buffer_action = self.actor._predict(obs, deterministic=False).cpu().numpy().astype(np.float32)
+            self._last_behaviour_mean = self.actor(obs).cpu().numpy().astype(np.float32)
+        return self.policy.unscale_action(buffer_action), buffer_action
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
         assert isinstance(replay_buffer, DENFACReplayBuffer)
@@ -292,6 +323,8 @@ class DENFAC(
         """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of steps of the
         rollout just collected (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
+        if self.policy.ent_coef_optimizer is not None:  # the tuned entropy coefficient learns at the actor's rate
+            update_learning_rate(self.policy.ent_coef_optimizer, self.actor_lr_schedule(self._current_progress_remaining))
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
@@ -323,10 +356,13 @@ class DENFAC(
             )
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_q = updater.critic(o2, self._target_actions(updater, o2))
+                next_actions, next_log_prob = self._target_actions(updater, o2)
+                next_q = updater.critic(o2, next_actions)
                 if bounds is not None:
                     clipped = ((next_q < bounds[0]) | (next_q > bounds[1])).float().mean()
                     next_q = next_q.clamp(*bounds)
+                if next_log_prob is not None:  # the soft actor: SAC's soft value Q(s', a') - alpha log pi(a'|s')
+                    next_q = next_q - self.policy.entropy_coefficient() * next_log_prob
                 q_targets = r + self.gamma * (1.0 - done) * next_q
                 weights = self._importance_weights(updater, o, o2, a, lp_b)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
@@ -353,16 +389,23 @@ class DENFAC(
         self.logger.record("train/importance_weight_mean", weights.mean().item())
         self.logger.record("train/importance_weight_min", weights.min().item())
         self.logger.record("train/fitted_iterations", n_iterations)
+        if self.policy.soft_actor:  # SB3 SAC's keys
+            self.logger.record("train/ent_coef", self.policy.entropy_coefficient().item())
+            self.logger.record("train/ent_coef_loss", updater.ent_coef_loss.item())
 
-    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> th.Tensor:
-        """The next actions of eq. (4)'s targets: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise
-        clipped to +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at
-        every fitted iteration; clamped to the action bounds [-1, 1]."""
+    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor | None]:
+        """The next actions of eq. (4)'s targets, and their log-density under the soft actor (None for the deterministic
+        one). Deterministic actor: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise clipped to
+        +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at every fitted
+        iteration; clamped to the action bounds [-1, 1]. Soft actor: a' ~ pi_{k-1}(.|s'), drawn anew at every fitted
+        iteration (SAC's, eq. 3)."""
+        if self.policy.soft_actor:
+            return updater.sample_actor(next_obs)
         actions = updater.actor(next_obs)
         if self.target_policy_noise > 0:
             noise = th.randn_like(actions) * self.target_policy_noise
             actions = actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)
-        return actions.clamp(-1.0, 1.0)
+        return actions.clamp(-1.0, 1.0), None
 
     def _importance_weights(
         self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor
@@ -399,4 +442,7 @@ class DENFAC(
         return [*super()._excluded_save_params(), "actor", "critic", "_last_update_stats", "gradient_steps"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        return ["policy", "actor.optimizer", "critic.optimizer"], []
+        state_dicts = ["policy", "actor.optimizer", "critic.optimizer"]
+        if self.policy.ent_coef_optimizer is not None:  # the tuned alpha's Adam (log alpha is in the policy's)
+            state_dicts.append("policy.ent_coef_optimizer")
+        return state_dicts, []

@@ -194,9 +194,9 @@ class _FlatNet:
             offset += n
 
 
-def supported_networks(policy) -> tuple[list[_Layer], list[list[_Layer]]] | None:
+def supported_networks(policy) -> tuple[list[_Layer] | None, list[list[_Layer]]] | None:
     """Parsed layers of the actor and of each Q network of the critic if the fast path supports this policy (vector
-    observations, Adam), else None."""
+    observations, Adam), else None; the actor's are None with the soft actor (fitted by autograd)."""
     from gymnasium import spaces
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
@@ -213,8 +213,13 @@ def supported_networks(policy) -> tuple[list[_Layer], list[list[_Layer]]] | None
             return None
     if not isinstance(policy.observation_space, spaces.Box) or len(policy.observation_space.shape) != 1:
         return None
-    actor_layers, critic_layers = parse_bn_mlp(policy.actor.mu), [parse_bn_mlp(q) for q in policy.critic.q_networks]
-    if actor_layers is None or any(layers is None for layers in critic_layers):
+    critic_layers = [parse_bn_mlp(q) for q in policy.critic.q_networks]
+    if any(layers is None for layers in critic_layers):
+        return None
+    if policy.soft_actor:  # SAC's actor stays on autograd (Updater.fit_soft_actor); the critic's steps are fast
+        return None, critic_layers  # type: ignore[return-value]
+    actor_layers = parse_bn_mlp(policy.actor.mu)
+    if actor_layers is None:
         return None
     return actor_layers, critic_layers  # type: ignore[return-value]
 
@@ -222,12 +227,14 @@ def supported_networks(policy) -> tuple[list[_Layer], list[list[_Layer]]] | None
 class FastUpdater(Updater):
     """The :class:`~sb3_denfac.denfac.updaters.Updater` on flat parameters with the eager steps of ``eager_steps.py``.
 
-    Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`.
+    Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`. With
+    the soft actor (``actor_layers`` None) only the critic is flat: the module's parameters are views of the flat ones,
+    so :meth:`~sb3_denfac.denfac.updaters.Updater.fit_soft_actor` ascends the critic as fitted so far.
     """
 
-    def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer], critic_layers: list[list[_Layer]]):
+    def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer] | None, critic_layers: list[list[_Layer]]):
         super().__init__(policy, settings)
-        self.actor_net = _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
+        self.actor_net = None if actor_layers is None else _FlatNet(policy.actor.mu, actor_layers, policy.actor.optimizer)
         self.critic_nets = [
             _FlatNet(q_net, layers, policy.critic.optimizer)
             for q_net, layers in zip(policy.critic.q_networks, critic_layers, strict=True)
@@ -235,7 +242,7 @@ class FastUpdater(Updater):
         self.critic_net = self.critic_nets[0]  # Q_1, the one the actor ascends
         # actor_proximal: pi_old = the actor at the start of the update (eval mode), as frozen folded affines
         self.old_actor_affines = None
-        if settings.actor_proximal > 0:
+        if settings.actor_proximal > 0 and self.actor_net is not None:
             self.old_actor_affines = [(w.clone(), b.clone()) for w, b in self.actor_net.eval_affines()]
 
     def reset_critic(self) -> None:
@@ -245,15 +252,20 @@ class FastUpdater(Updater):
 
     def reset_actor(self) -> None:
         super().reset_actor()
-        self.actor_net.reset()
+        if self.actor_net is not None:
+            self.actor_net.reset()
 
     def finish(self) -> None:
         for net in (self.actor_net, *self.critic_nets):
-            net.write_back()
+            if net is not None:
+                net.write_back()
 
     @th.no_grad()
     def actor(self, obs: th.Tensor) -> th.Tensor:
         """pi(s) in eval mode (running statistics), (N, A) like ``policy.actor(obs)``, from the flat parameters."""
+        if self.actor_net is None:  # the soft actor: its deterministic action, from the module
+            self.policy.actor.set_training_mode(False)
+            return self.policy.actor(obs)
         return self.actor_net.eval_forward(obs.float().t()).t()
 
     @th.no_grad()
@@ -301,6 +313,9 @@ class FastUpdater(Updater):
     @th.no_grad()
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         net, steps = self.actor_net, self.settings.actor_steps
+        if net is None:
+            with th.enable_grad():
+                return self.fit_soft_actor(obs, batches)
         if steps == 0:
             return th.zeros(())
         if self.fresh_bn_statistics(self.policy.actor):

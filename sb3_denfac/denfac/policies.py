@@ -17,6 +17,7 @@ from stable_baselines3.common.policies import BaseModel, BasePolicy
 from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from stable_baselines3.sac.policies import Actor as SACActor
 from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
@@ -33,6 +34,22 @@ class DENFACActor(DeterministicActor):
 
     def __init__(self, *args: Any, bn_momentum: float | None = None, sigma: float | None = 0.1, **kwargs: Any):
         super().__init__(*args, bn_momentum=bn_momentum, sigma=sigma, **kwargs)
+
+
+class DENFACSoftActor(SACActor):
+    """The soft actor of DENFAC's ``ent_coef`` option: SB3's SAC actor (Haarnoja et al. 2018), a squashed Gaussian
+    pi(a|s) = tanh(N(m(s), exp(l(s))^2)) whose mean m and log std l (clamped to [-20, 2]) are two linear heads on one MLP
+    (``net_arch`` pi, no batch norm); ``action_log_prob(s)`` gives a reparameterised sample and its log-density.
+
+    ``forward(s)`` is the deterministic action tanh(m(s)), as the deterministic actors' ``forward`` is mu(s) (what
+    exploration and evaluation read as the actor's mean); ``predict(deterministic=False)`` samples pi(.|s).
+    """
+
+    def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
+        return super().forward(obs, deterministic=deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return super().forward(observation, deterministic=deterministic)
 
 
 class DENFACCritic(BaseModel):
@@ -142,9 +159,15 @@ class DENFACPolicy(BasePolicy):
     :param optimizer_class: optimiser (default Adam)
     :param optimizer_kwargs: optimiser keyword arguments (DENFAC passes ``betas`` and ``eps``)
     :param n_critics: Q networks of the critic (default 2: clipped double Q, see :class:`DENFACCritic`; paper: 1)
+    :param soft_actor: the actor is :class:`DENFACSoftActor` (SAC's squashed Gaussian), and the policy holds the
+        entropy coefficient of its objective, ``log_ent_coef`` (and its optimiser ``ent_coef_optimizer`` when tuned);
+        DENFAC sets it from its ``ent_coef`` (default False: the deterministic actor mu(s))
+    :param ent_coef: alpha, the entropy coefficient of the soft actor (SB3's SAC ``ent_coef``): "auto" (tuned, from
+        1), "auto_<x>" (tuned, from x) or a float (fixed); unused without ``soft_actor``
+    :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18); "auto": -dim(A)
     """
 
-    actor: DENFACActor
+    actor: DENFACActor | DENFACSoftActor
     critic: DENFACCritic
 
     def __init__(
@@ -166,6 +189,9 @@ class DENFACPolicy(BasePolicy):
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
         n_critics: int = 2,
+        soft_actor: bool = False,
+        ent_coef: str | float = "auto",
+        target_entropy: str | float = "auto",
     ):
         super().__init__(
             observation_space,
@@ -188,6 +214,13 @@ class DENFACPolicy(BasePolicy):
         self.sigma = sigma
         self.actor_learning_rate = actor_learning_rate
         self.critic_learning_rate = critic_learning_rate
+        self.soft_actor = bool(soft_actor)
+        self.ent_coef, self.target_entropy = ent_coef, target_entropy
+        if self.soft_actor and batch_norm:
+            raise ValueError(
+                "soft_actor (DENFAC's ent_coef) is SAC's squashed Gaussian actor, which has no batch norm: use "
+                "batch_norm=False with it"
+            )
         common = dict(
             observation_space=self.observation_space,
             action_space=self.action_space,
@@ -202,10 +235,47 @@ class DENFACPolicy(BasePolicy):
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
-        self.actor = DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
+        if self.soft_actor:
+            kwargs = self._update_features_extractor(self.actor_kwargs)
+            for key in ("batch_norm", "bn_momentum", "init", "sigma"):  # the deterministic actor's
+                kwargs.pop(key)
+            self.actor = DENFACSoftActor(**kwargs)  # type: ignore[arg-type]
+        else:
+            self.actor = DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
         self.critic = DENFACCritic(**self._update_features_extractor(self.critic_kwargs))  # type: ignore[arg-type]
         self.actor.optimizer = self.make_optimizer(self.actor, self.actor_learning_rate, lr_schedule)
         self.critic.optimizer = self.make_optimizer(self.critic, self.critic_learning_rate, lr_schedule)
+        self.ent_coef_optimizer: th.optim.Optimizer | None = None
+        if self.soft_actor:
+            self._build_temperature()
+
+    def _build_temperature(self) -> None:
+        """alpha = exp(log_ent_coef): a parameter with its own Adam optimiser at the actor's rate when tuned (SAC's
+        ``ent_coef="auto"``), a constant buffer when fixed; the target entropy of the tuning (SAC's eq. 18)."""
+        initial, tuned = parse_ent_coef(self.ent_coef)
+        log_value = th.log(th.tensor([initial]))
+        self.target_entropy_value = check_target_entropy(self.target_entropy, self.action_space)
+        if tuned:
+            self.log_ent_coef = nn.Parameter(log_value)
+            lr = self.actor.optimizer.param_groups[0]["lr"]
+            self.ent_coef_optimizer = th.optim.Adam([self.log_ent_coef], lr=lr)
+        else:
+            self.register_buffer("log_ent_coef", log_value)
+
+    def entropy_coefficient(self) -> th.Tensor:
+        """alpha, detached, shape (1,)."""
+        return self.log_ent_coef.detach().exp()
+
+    def temperature_step(self, log_prob: th.Tensor) -> th.Tensor:
+        """With a tuned alpha, one Adam step on SAC's eq. 18, -log alpha (log pi(a|s) + target entropy) averaged over
+        the samples of ``log_prob`` (detached); returns that loss (0 with a fixed alpha)."""
+        if self.ent_coef_optimizer is None:
+            return th.zeros(())
+        loss = -(self.log_ent_coef * (log_prob.detach() + self.target_entropy_value)).mean()
+        self.ent_coef_optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.ent_coef_optimizer.step()
+        return loss.detach()
 
     def make_optimizer(self, net: nn.Module, rate: float | Schedule | None, lr_schedule: Schedule) -> th.optim.Optimizer:
         rate = lr_schedule if rate is None else rate
@@ -230,6 +300,9 @@ class DENFACPolicy(BasePolicy):
                 features_extractor_class=self.features_extractor_class,
                 features_extractor_kwargs=self.features_extractor_kwargs,
                 n_critics=self.critic.n_critics,  # validated by the critic
+                soft_actor=self.soft_actor,
+                ent_coef=self.ent_coef,
+                target_entropy=self.target_entropy,
             )
         )
         return data
@@ -247,13 +320,38 @@ class DENFACPolicy(BasePolicy):
 
     def reset_actor(self) -> None:
         """Re-initialise the actor in place (weights and BN statistics) and forget its Adam state."""
-        reset_parameters_(self.actor, self.init)
+        reset_parameters_(self.actor, "default" if self.soft_actor else self.init)
         self.actor.optimizer.state.clear()
 
     def reset_critic(self) -> None:
         """Re-initialise the critic in place (weights and BN statistics) and forget its Adam state."""
         reset_parameters_(self.critic, self.init)
         self.critic.optimizer.state.clear()
+
+
+def parse_ent_coef(ent_coef: str | float) -> tuple[float, bool]:
+    """(initial alpha, tuned) of SB3 SAC's ``ent_coef``: "auto" (1, tuned), "auto_<x>" (x, tuned), a float (fixed)."""
+    tuned = isinstance(ent_coef, str) and (ent_coef == "auto" or ent_coef.startswith("auto_"))
+    value = ("1.0" if ent_coef == "auto" else ent_coef[len("auto_") :]) if tuned else ent_coef  # type: ignore[index]
+    try:
+        initial = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        initial = float("nan")
+    if isinstance(ent_coef, bool) or not 0 < initial < float("inf"):
+        raise ValueError(
+            'ent_coef must be "auto", "auto_<initial value>" or a positive float (SAC\'s entropy coefficient alpha), '
+            f"got {ent_coef!r}"
+        )
+    return initial, tuned
+
+
+def check_target_entropy(target_entropy: str | float, action_space: spaces.Space) -> float:
+    """The target entropy of the tuned alpha: "auto" is -dim(A) (SAC's), else a float."""
+    if target_entropy == "auto":
+        return -float(get_action_dim(action_space))
+    if isinstance(target_entropy, bool) or not isinstance(target_entropy, (int, float)):
+        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a float, got {target_entropy!r}')
+    return float(target_entropy)
 
 
 MlpPolicy = DENFACPolicy

@@ -13,7 +13,10 @@
 - ``fit_critic(s, a, q, c, batches)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for
   each Q network, on the same mini-batches (``batches``, or drawn by the updater);
 - ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
-  (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
+  (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`); with
+  the soft actor (DENFAC's ``ent_coef``), G steps of SAC's actor and temperature instead (:meth:`Updater.fit_soft_actor`,
+  on the policy's modules in both implementations);
+- ``sample_actor(s)``: the soft actor's a ~ pi(.|s) and log pi(a|s), for the soft targets of eq. (4);
 - ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
@@ -36,6 +39,7 @@ from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
+from sb3_denfac.denfac.policies import combine_critics
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,7 @@ class FitSettings:
     priority_eps: float = 1e-3
     actor_proximal: float = 0.0  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
     critic_target: str = "min"  # how several Q networks make the bootstrap value: "min" or "mean" (combine_critics)
+    soft_actor: bool = False  # SAC's squashed Gaussian actor and its entropy coefficient (DENFAC's ``ent_coef``)
 
     @staticmethod
     def of(model: Any) -> FitSettings:
@@ -71,6 +76,7 @@ class FitSettings:
             priority_eps=model.priority_eps,
             actor_proximal=model.actor_proximal,
             critic_target=model.critic_target,
+            soft_actor=model.policy.soft_actor,
         )
 
 
@@ -93,6 +99,7 @@ class Updater(ABC):
     def __init__(self, policy: nn.Module, settings: FitSettings):
         self.policy = policy
         self.settings = settings
+        self.ent_coef_loss = th.zeros(())  # the soft actor's last temperature loss (SAC's eq. 18)
 
     def batch_indices(self, n: int) -> th.Tensor | None:
         """Indices of one uniformly drawn mini-batch out of ``n`` samples (with replacement, as SB3's replay buffers
@@ -168,6 +175,47 @@ class Updater(ABC):
     def finish(self) -> None:  # noqa: B027 (optional hook: the autograd updater keeps nothing outside the modules)
         """Called once after the K fitted iterations."""
 
+    @th.no_grad()
+    def sample_actor(self, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        """The soft actor's a ~ pi(.|s) and log pi(a|s), shapes (N, A) and (N, 1), in eval mode."""
+        actor = self.policy.actor
+        actor.set_training_mode(False)
+        actions, log_prob = actor.action_log_prob(obs)
+        return actions, log_prob.unsqueeze(1)
+
+    def fit_soft_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
+        """G Adam steps of the soft actor on SAC's objective (Haarnoja et al. 2018, eq. 7), 1/B sum alpha log pi(a|s) -
+        min_j Q_j(s, a) with a ~ pi(.|s) reparameterised (the critics in eval mode), each followed by one step of the
+        tuned alpha (eq. 18, :meth:`~sb3_denfac.denfac.policies.DENFACPolicy.temperature_step`); no proximal term and no
+        inverting gradients (tanh bounds the actions). Step i reads the rows ``batches[i]`` (None: one uniform mini-batch
+        per step, or the full batch); returns the last objective, the negated loss."""
+        policy, settings = self.policy, self.settings
+        actor, critic = policy.actor, policy.critic
+        objective = th.zeros(())
+        if settings.actor_steps == 0:
+            return objective
+        actor.set_training_mode(True)
+        critic.set_training_mode(False)
+        critic.requires_grad_(False)
+        for step in range(settings.actor_steps):
+            idx = batches[step] if batches is not None else self.batch_indices(obs.shape[0])
+            o = obs if idx is None else obs[idx]
+            ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
+            actions, log_prob = actor.action_log_prob(o)
+            log_prob = log_prob.unsqueeze(1)
+            q = combine_critics(critic.all_q(o, actions), "min")
+            loss = (ent_coef * log_prob - q).mean()
+            actor.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if settings.max_grad_norm is not None:
+                clip_grad_norm_(actor.parameters(), settings.max_grad_norm)
+            actor.optimizer.step()
+            self.ent_coef_loss = policy.temperature_step(log_prob)
+            objective = -loss.detach()
+        critic.requires_grad_(True)
+        actor.set_training_mode(False)
+        return objective
+
 
 class AutogradUpdater(Updater):
     """Autograd on the policy's modules, ``clip_grad_norm_`` and the modules' own ``torch.optim`` optimizers.
@@ -186,7 +234,8 @@ class AutogradUpdater(Updater):
         twin_ids = {id(p) for group in twins for p in group}
         self.clip_groups = [[p for p in policy.critic.parameters() if id(p) not in twin_ids], *twins]
         self.old_actor: nn.Module | None = None
-        if settings.actor_proximal > 0:  # pi_old: frozen, eval mode (running statistics of the start of the update)
+        # pi_old: frozen, eval mode (running statistics of the start of the update); the soft actor has no proximal term
+        if settings.actor_proximal > 0 and not settings.soft_actor:
             self.old_actor = copy.deepcopy(policy.actor)
             self.old_actor.optimizer = None
             self.old_actor.set_training_mode(False)
@@ -246,6 +295,8 @@ class AutogradUpdater(Updater):
 
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         actor, critic, settings = self.policy.actor, self.policy.critic, self.settings
+        if settings.soft_actor:
+            return self.fit_soft_actor(obs, batches)
         objective = th.zeros(())
         if settings.actor_steps == 0:
             return objective
