@@ -171,6 +171,12 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # policy it explores with
     c["default05+tpn0.1"] = merge(c["default05"], dict(target_policy_noise=0.1))
     c["default05+tpn0.3"] = merge(c["default05"], dict(target_policy_noise=0.3))  # and wider than 0.5's
+    # The soft actor (the library's ``ent_coef``, section 23's bounded variant: SAC's actor, temperature and soft targets
+    # in the fitted iterations, the critics' mean bounded) and, for InvertedPendulum's and CartPole's exploring
+    # episodes (behind the matched SAC's), the matched SAC's width and learning rate one at a time (section 24)
+    c["soft"] = merge(c["default05+bounds"], dict(ent_coef="auto"))
+    c["soft+nets256"] = merge(c["soft"], dict(policy_kwargs=wide))
+    c["soft+lr3e-4"] = merge(c["soft"], dict(learning_rate=3e-4))
     return c
 
 

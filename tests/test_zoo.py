@@ -236,13 +236,14 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
 
 def test_denfac_sampler_tunes_the_stability_options() -> None:
     """The DENFAC sampler offers both values of n_critics, the plain ascent (lambda 0) besides proximal actors, both
-    critic targets with and without smoothing, with and without bootstrap bounds, and the model the zoo builds from a
-    trial has what was sampled."""
+    critic targets with and without smoothing, with and without bootstrap bounds, both actors (the soft one over the
+    paper entry's batch norm and importance weights), and the model the zoo builds from a trial has what was sampled."""
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("denfac")), ENV)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     seen: set[tuple[int, bool]] = set()
     targets: set[tuple[str, bool]] = set()
     bounds: set[bool] = set()
+    actors: set[bool] = set()
     for _ in range(16):
         trial = study.ask()
         trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry["policy_kwargs"])
@@ -254,12 +255,15 @@ def test_denfac_sampler_tunes_the_stability_options() -> None:
         assert model.target_policy_noise == trial.params["target_policy_noise"]
         assert model.bootstrap_bounds == trial.params["bootstrap_bounds"]
         bounds.add(model.bootstrap_bounds)
+        assert model.policy.soft_actor == (trial.params["actor"] == "soft") == (model.ent_coef == "auto")
+        actors.add(model.policy.soft_actor)
         seen.add((trial.params["n_critics"], trial.params["actor_proximal"] > 0))
         targets.add((trial.params["critic_target"], trial.params["target_policy_noise"] > 0))
         model.get_env().close()
     assert seen == {(1, False), (1, True), (2, False), (2, True)}
     assert targets == {("mean", False), ("mean", True), ("min", False), ("min", True)}
     assert bounds == {False, True}
+    assert actors == {False, True}
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)

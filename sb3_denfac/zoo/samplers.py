@@ -68,10 +68,13 @@ def _copy_except(params: dict[str, Any], *names: str) -> dict[str, Any]:
 
 
 def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
-    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "n_critics")
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "n_critics", "actor")
     hyperparams["policy_kwargs"] = _policy_kwargs(params)
     if "n_critics" in params:  # a policy keyword argument (the critic), as in SB3's TD3 and SAC
         hyperparams["policy_kwargs"]["n_critics"] = params["n_critics"]
+    if params.get("actor") == "soft":  # SAC's actor: what it needs over a paper entry's batch norm and weights
+        hyperparams.update(ent_coef="auto", weighting="none")
+        hyperparams["policy_kwargs"]["batch_norm"] = False
     return hyperparams
 
 
@@ -79,7 +82,8 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
     """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes, the
     proximal actor's lambda, the number of critics, and how eq. (4)'s targets combine them (``critic_target``), smooth
     the next action (``target_policy_noise``; 0 = the paper's pi(s')) and bound the bootstrap value
-    (``bootstrap_bounds``)."""
+    (``bootstrap_bounds``), and the actor: the deterministic one or the soft one (``ent_coef="auto"``, with
+    ``weighting="none"`` and no batch norm, which it needs)."""
     params = {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
@@ -97,6 +101,7 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "critic_target": trial.suggest_categorical("critic_target", ["mean", "min"]),
         "target_policy_noise": trial.suggest_categorical("target_policy_noise", [0.0, 0.1, 0.2, 0.3]),
         "bootstrap_bounds": trial.suggest_categorical("bootstrap_bounds", [False, True]),
+        "actor": trial.suggest_categorical("actor", ["deterministic", "soft"]),
     }
     return _sampled(trial, convert_denfac_params(params))
 
