@@ -48,9 +48,40 @@ def test_bad_input_names_the_cause(soft_model):
         (dict(prioritized="both"), "not implemented for the soft actor"),
         (dict(policy_kwargs=dict(batch_norm=True)), "no batch norm"),
         (dict(target_entropy="high"), "target_entropy must be"),
+        (dict(target_entropy=float("nan")), "target_entropy must be"),
+        (dict(target_entropy=float("-inf")), "target_entropy must be"),
+        (dict(ent_coef=None, policy_kwargs=dict(soft_actor=True)), "the soft actor is DENFAC's ent_coef option"),
     ]:
         with pytest.raises(ValueError, match=match):
             soft_model(**kwargs)
+
+
+def test_target_entropy_takes_numpy_numbers(soft_model):
+    """SAC's usual -np.prod(action_space.shape) is accepted."""
+    assert soft_model(target_entropy=-np.prod((1,))).policy.target_entropy_value == -1.0
+    assert soft_model(target_entropy=np.float32(-0.5)).policy.target_entropy_value == -0.5
+
+
+def test_soft_actor_on_a_matrix_action_space(target_action_env):
+    """A Box action space of shape (2, 2): the played and predicted actions have its shape."""
+    from gymnasium import spaces
+
+    class MatrixActionEnv(target_action_env):
+        def __init__(self):
+            super().__init__()
+            self.action_space = spaces.Box(-2.0, 2.0, (2, 2), np.float32)
+
+        def step(self, action):
+            assert action.shape == (2, 2)
+            self.t += 1
+            reward = -float((action[0, 0] / 2 - 0.6) ** 2)
+            obs = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+            return obs, reward, False, self.t >= self.episode_length, {}
+
+    model = DENFAC("MlpPolicy", MatrixActionEnv(), **SMALL, ent_coef="auto").learn(30)
+    obs = np.zeros((3, 2), np.float32)
+    assert model.predict(obs, deterministic=True)[0].shape == (3, 2, 2)
+    assert model.replay_buffer.actions.shape[1:] == (1, 4)
 
 
 def test_soft_actor_explores_by_sampling(soft_model):
@@ -102,6 +133,14 @@ def test_fast_updater_fits_the_critic_only(soft_model):
     model = soft_model(update_path="fast")
     updater = model._make_updater()
     assert isinstance(updater, FastUpdater) and updater.actor_net is None and len(updater.critic_nets) == 2
+
+
+def test_a_fixed_alpha_is_the_models_ent_coef_after_a_load(tmp_path, soft_model, target_action_env):
+    """As SB3's SAC: a fixed alpha is not a saved value; ``load(..., ent_coef=x)`` trains on with x."""
+    soft_model(ent_coef=0.1).learn(40).save(tmp_path / "model.zip")
+    assert DENFAC.load(tmp_path / "model.zip").policy.entropy_coefficient().item() == pytest.approx(0.1)
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env(), ent_coef=0.5)
+    assert loaded.policy.entropy_coefficient().item() == pytest.approx(0.5)
 
 
 def test_save_load_is_exact(tmp_path, soft_model, target_action_env):

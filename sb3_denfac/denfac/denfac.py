@@ -282,6 +282,11 @@ class DENFAC(
         self.policy_kwargs["sigma"] = self.sigma
         if self.ent_coef is not None:  # the soft actor (files saved before ent_coef existed: the deterministic one)
             self.policy_kwargs.update(soft_actor=True, ent_coef=self.ent_coef, target_entropy=self.target_entropy)
+        elif self.policy_kwargs.get("soft_actor"):
+            raise ValueError(
+                "policy_kwargs soft_actor=True: the soft actor is DENFAC's ent_coef option (which also checks the options "
+                "it needs); use ent_coef='auto' (or a float) instead"
+            )
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
         if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
             optimizer_kwargs.setdefault("betas", self.adam_betas)
@@ -307,9 +312,10 @@ class DENFAC(
         # the soft actor: a ~ pi(.|s); D's behaviour mean is its deterministic action tanh(m(s))
         self.policy.set_training_mode(False)
         obs, _ = self.policy.obs_to_tensor(self._last_obs)
+        shape = (-1, *self.action_space.shape)  # the actor's (n_envs, dim(A)) as the action space's shape
         with th.no_grad():
-            buffer_action = self.actor._predict(obs, deterministic=False).cpu().numpy().astype(np.float32)
-            self._last_behaviour_mean = self.actor(obs).cpu().numpy().astype(np.float32)
+            buffer_action = self.actor._predict(obs, deterministic=False).cpu().numpy().reshape(shape).astype(np.float32)
+            self._last_behaviour_mean = self.actor(obs).cpu().numpy().reshape(shape).astype(np.float32)
         return self.policy.unscale_action(buffer_action), buffer_action
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:

@@ -9,8 +9,11 @@ two, linear last layer, weights N(0, 0.01), one Q network. Critic hidden layers 
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Any
 
+import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BaseModel, BasePolicy
@@ -42,7 +45,9 @@ class DENFACSoftActor(SACActor):
     (``net_arch`` pi, no batch norm); ``action_log_prob(s)`` gives a reparameterised sample and its log-density.
 
     ``forward(s)`` is the deterministic action tanh(m(s)), as the deterministic actors' ``forward`` is mu(s) (what
-    exploration and evaluation read as the actor's mean); ``predict(deterministic=False)`` samples pi(.|s).
+    exploration and evaluation read as the actor's mean); ``predict(deterministic=False)`` samples pi(.|s). Its weights
+    start (and ``reset_actor`` restarts them) from PyTorch's initialisation, SAC's; the policy's ``init`` applies to
+    the critic.
     """
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
@@ -260,7 +265,8 @@ class DENFACPolicy(BasePolicy):
             lr = self.actor.optimizer.param_groups[0]["lr"]
             self.ent_coef_optimizer = th.optim.Adam([self.log_ent_coef], lr=lr)
         else:
-            self.register_buffer("log_ent_coef", log_value)
+            # not saved: a fixed alpha is the model's ``ent_coef`` (a load with another ``ent_coef`` uses it, as SB3's SAC)
+            self.register_buffer("log_ent_coef", log_value, persistent=False)
 
     def entropy_coefficient(self) -> th.Tensor:
         """alpha, detached, shape (1,)."""
@@ -347,10 +353,12 @@ def parse_ent_coef(ent_coef: str | float) -> tuple[float, bool]:
 
 def check_target_entropy(target_entropy: str | float, action_space: spaces.Space) -> float:
     """The target entropy of the tuned alpha: "auto" is -dim(A) (SAC's), else a float."""
-    if target_entropy == "auto":
+    if isinstance(target_entropy, str) and target_entropy == "auto":
         return -float(get_action_dim(action_space))
-    if isinstance(target_entropy, bool) or not isinstance(target_entropy, (int, float)):
-        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a float, got {target_entropy!r}')
+    if isinstance(target_entropy, (bool, np.bool_)) or not isinstance(target_entropy, numbers.Real):
+        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
+    if not math.isfinite(float(target_entropy)):
+        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
     return float(target_entropy)
 
 
