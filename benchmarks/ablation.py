@@ -177,6 +177,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["soft"] = merge(c["default05+bounds"], dict(ent_coef="auto"))
     c["soft+nets256"] = merge(c["soft"], dict(policy_kwargs=wide))
     c["soft+lr3e-4"] = merge(c["soft"], dict(learning_rate=3e-4))
+    # SAC's ratio of actor (and alpha) steps to critic steps, 1: G = 50 per fitted iteration instead of 25
+    c["soft+G50"] = merge(c["soft"], dict(actor_steps=50))
     return c
 
 
