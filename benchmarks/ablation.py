@@ -179,6 +179,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["soft+lr3e-4"] = merge(c["soft"], dict(learning_rate=3e-4))
     # SAC's ratio of actor (and alpha) steps to critic steps, 1: G = 50 per fitted iteration instead of 25
     c["soft+G50"] = merge(c["soft"], dict(actor_steps=50))
+    # fresher targets at about the same steps per episode: 20 fitted iterations of 25 critic and 12 actor steps
+    c["soft+K20"] = merge(c["soft"], dict(n_fitted_iterations=20, critic_steps=25, actor_steps=12))
     return c
 
 
