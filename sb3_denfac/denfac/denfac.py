@@ -297,6 +297,13 @@ class DENFAC(
         self._setup_actor_critic_schedules()
         check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
 
+    def _apply_learning_rates(self, progress_remaining: float) -> dict[str, float]:
+        """ActorCriticRatesMixin's rates, and the soft actor's tuned entropy coefficient at the actor's rate."""
+        rates = super()._apply_learning_rates(progress_remaining)
+        if self.policy.ent_coef_optimizer is not None:
+            update_learning_rate(self.policy.ent_coef_optimizer, rates["actor"])
+        return rates
+
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
         self.critic = self.policy.critic
@@ -309,13 +316,15 @@ class DENFAC(
             raise ValueError("DENFAC explores with its truncated Gaussian (sigma); action_noise is not supported")
         if not self.policy.soft_actor or self.num_timesteps < learning_starts:
             return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
-        # the soft actor: a ~ pi(.|s); D's behaviour mean is its deterministic action tanh(m(s))
+        # the soft actor: a ~ pi(.|s); D's behaviour mean is its deterministic action tanh(m(s)); one forward pass
         self.policy.set_training_mode(False)
         obs, _ = self.policy.obs_to_tensor(self._last_obs)
-        shape = (-1, *self.action_space.shape)  # the actor's (n_envs, dim(A)) as the action space's shape
         with th.no_grad():
-            buffer_action = self.actor._predict(obs, deterministic=False).cpu().numpy().reshape(shape).astype(np.float32)
-            self._last_behaviour_mean = self.actor(obs).cpu().numpy().reshape(shape).astype(np.float32)
+            mean, log_std, _ = self.actor.get_action_dist_params(obs)
+            sampled = self.actor.action_dist.actions_from_params(mean, log_std)
+        shape = (-1, *self.action_space.shape)  # the actor's (n_envs, dim(A)) as the action space's shape
+        buffer_action = sampled.cpu().numpy().reshape(shape).astype(np.float32)
+        self._last_behaviour_mean = th.tanh(mean).cpu().numpy().reshape(shape).astype(np.float32)
         return self.policy.unscale_action(buffer_action), buffer_action
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
@@ -329,8 +338,6 @@ class DENFAC(
         """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of steps of the
         rollout just collected (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
-        if self.policy.ent_coef_optimizer is not None:  # the tuned entropy coefficient learns at the actor's rate
-            update_learning_rate(self.policy.ent_coef_optimizer, self.actor_lr_schedule(self._current_progress_remaining))
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait

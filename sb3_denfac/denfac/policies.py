@@ -355,11 +355,10 @@ def check_target_entropy(target_entropy: str | float, action_space: spaces.Space
     """The target entropy of the tuned alpha: "auto" is -dim(A) (SAC's), else a float."""
     if isinstance(target_entropy, str) and target_entropy == "auto":
         return -float(get_action_dim(action_space))
-    if isinstance(target_entropy, (bool, np.bool_)) or not isinstance(target_entropy, numbers.Real):
+    is_real = isinstance(target_entropy, numbers.Real) and not isinstance(target_entropy, (bool, np.bool_))
+    if not is_real or not math.isfinite(float(target_entropy)):  # type: ignore[arg-type]
         raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
-    if not math.isfinite(float(target_entropy)):
-        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
-    return float(target_entropy)
+    return float(target_entropy)  # type: ignore[arg-type]
 
 
 MlpPolicy = DENFACPolicy

@@ -39,7 +39,6 @@ from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
-from sb3_denfac.denfac.policies import combine_critics
 
 
 @dataclass(frozen=True)
@@ -203,7 +202,7 @@ class Updater(ABC):
             ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
             actions, log_prob = actor.action_log_prob(o)
             log_prob = log_prob.unsqueeze(1)
-            q = combine_critics(critic.all_q(o, actions), "min")
+            q = critic.target_q(o, actions, "min")
             loss = (ent_coef * log_prob - q).mean()
             actor.optimizer.zero_grad(set_to_none=True)
             loss.backward()
