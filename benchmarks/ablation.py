@@ -181,6 +181,10 @@ def build_configs() -> dict[str, dict[str, Any]]:
     c["soft+G50"] = merge(c["soft"], dict(actor_steps=50))
     # fresher targets at about the same steps per episode: 20 fitted iterations of 25 critic and 12 actor steps
     c["soft+K20"] = merge(c["soft"], dict(n_fitted_iterations=20, critic_steps=25, actor_steps=12))
+    # the critics' minimum in the soft targets (SAC's clipped double Q; section 23's "SAC's whole" held CartPole best),
+    # alone and with the fresher targets of K = 20 (section 25)
+    c["soft+min"] = merge(c["soft"], dict(critic_target="min"))
+    c["soft+min+K20"] = merge(c["soft+K20"], dict(critic_target="min"))
     return c
 
 
