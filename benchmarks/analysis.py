@@ -31,7 +31,7 @@ RUN_FIELDS = [
     *("hyperparams_source", "commit", "device"),
 ]
 #: The rows of the user's answer (suite ``matched``): DENFAC's default (and its soft actor) against SAC at each schedule.
-ANSWER_ALGOS = ("denfac_default", "denfac_default04", "denfac_soft", "sac", "sac_matched", "td3_matched")
+ANSWER_ALGOS = ("denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min", "sac", "sac_matched", "td3_matched")
 #: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
 #: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes; its 1000 is "survives about the whole episode"
 #: (standing still for 1000 steps earns 1000 of survival bonus), so its cells also give the return beyond that bonus.
@@ -358,7 +358,7 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
             f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
         ]
         lines += [f"IQM of the normalised {meaning}:", "", _md(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
-    for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft"):
+    for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min"):
         if denfac not in set(runs["algo"]):
             continue
         rows = []

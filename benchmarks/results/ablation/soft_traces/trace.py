@@ -1,0 +1,74 @@
+"""Trace of one ablation configuration's updates (ablation README, section 25): per episode, its return and length,
+and after the update that follows it alpha (``train/ent_coef``), the mean target (``train/q_target_mean``), the share
+of bootstrap values outside the bounds (``train/bootstrap_clip_fraction``), the critic's loss, and the soft actor's
+standard deviation (before tanh) over the states of D: median and 90th percentile.
+
+A separate run from the benchmark's (plain ``Monitor`` env, no evaluations), so it does not reproduce a sweep run's
+trajectory; it shows what the values and the policy do over one run.
+
+Usage: ``python trace.py soft+min+K20 acrobot 0 100 out.jsonl`` (configuration of ``benchmarks.ablation``, short env
+name or Gymnasium id, seed, episodes, output file).
+"""
+
+import json
+import sys
+
+import gymnasium as gym
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+
+import benchmarks.suites  # noqa: F401  (registers the ablation rows before benchmarks.ablation is read)
+import sb3_denfac.envs  # noqa: F401  (the paper's env ids)
+from benchmarks.ablation import hyperparams
+from sb3_denfac import DENFAC
+from sb3_denfac.envs.facts import env_facts
+
+LOGGED = ("train/q_target_mean", "train/bootstrap_clip_fraction", "train/ent_coef", "train/critic_loss")
+
+
+class Trace(BaseCallback):
+    """One row per episode; the update that follows it is read when the next rollout starts (before any log dump)."""
+
+    def __init__(self, episodes: int):
+        super().__init__()
+        self.episodes, self.rows, self.ret = episodes, [], 0.0
+
+    def _on_step(self) -> bool:
+        self.ret += float(self.locals["rewards"][0])
+        if self.locals["dones"][0]:
+            length = self.locals["infos"][0].get("episode", {}).get("l")
+            self.rows.append(dict(ep=len(self.rows) + 1, ret=self.ret, len=length))
+            self.ret = 0.0
+        return len(self.rows) < self.episodes
+
+    def _on_rollout_start(self) -> None:
+        values = self.model.logger.name_to_value
+        if not self.rows or "train/q_target_mean" not in values:
+            return
+        row = self.rows[-1]
+        row.update({key.split("/")[1]: float(values[key]) for key in LOGGED if key in values})
+        policy = self.model.policy
+        if policy.soft_actor:
+            buffer = self.model.replay_buffer
+            with th.no_grad():
+                _, log_std, _ = policy.actor.get_action_dist_params(th.as_tensor(buffer.observations[: buffer.size(), 0]))
+            std = log_std.exp()
+            row.update(std_median=float(std.median()), std_p90=float(std.quantile(0.9)))
+
+
+def main(config: str, env_name: str, seed: int, episodes: int, out: str) -> None:
+    th.set_num_threads(1)
+    facts = env_facts(env_name)
+    kwargs = hyperparams(config, env_name)
+    if facts.gamma is not None:
+        kwargs.setdefault("gamma", facts.gamma)
+    model = DENFAC("MlpPolicy", Monitor(gym.make(facts.gym_id)), seed=seed, **kwargs)
+    trace = Trace(episodes)
+    model.learn(10**8, callback=trace)
+    with open(out, "w") as f:
+        f.writelines(json.dumps(row) + "\n" for row in trace.rows)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5])
