@@ -135,7 +135,7 @@ def test_suites_and_cells():
     frozen = suites.load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
     matched = runner.select_cells("matched")
-    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 7 * 7 * 5
+    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 8 * 7 * 5
     ablation = suites.SUITES["ablation"]
     assert ablation.study == "ablation" and ablation.diagnostics_every > 0
     assert runner.default_results_dir("ablation").name == "ablation" and runner.default_results_dir(None).name == "sweep"
