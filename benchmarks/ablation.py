@@ -185,6 +185,8 @@ def build_configs() -> dict[str, dict[str, Any]]:
     # alone and with the fresher targets of K = 20 (section 25)
     c["soft+min"] = merge(c["soft"], dict(critic_target="min"))
     c["soft+min+K20"] = merge(c["soft+K20"], dict(critic_target="min"))
+    # a wider entropy target (0 instead of SAC's -dim(A)): alpha rises again when the policy narrows below it (section 25)
+    c["soft+min+K20+te0"] = merge(c["soft+min+K20"], dict(target_entropy=0.0))
     return c
 
 
