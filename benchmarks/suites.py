@@ -82,10 +82,8 @@ ALGOS: dict[str, Algo] = {
             "denfac",
             "DENFAC, soft actor, min targets, K = 20",
             "paper",
-            base="denfac_default",
+            base="denfac_soft",
             overrides=(
-                ("ent_coef", "auto"),
-                ("bootstrap_bounds", True),
                 ("critic_target", "min"),
                 ("n_fitted_iterations", 20),
                 ("critic_steps", 25),

@@ -18,9 +18,8 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
-import benchmarks.suites  # noqa: F401  (registers the ablation rows before benchmarks.ablation is read)
 import sb3_denfac.envs  # noqa: F401  (the paper's env ids)
-from benchmarks.ablation import hyperparams
+from benchmarks.suites import load_hyperparams
 from sb3_denfac import DENFAC
 from sb3_denfac.envs.facts import env_facts
 
@@ -59,11 +58,9 @@ class Trace(BaseCallback):
 
 def main(config: str, env_name: str, seed: int, episodes: int, out: str) -> None:
     th.set_num_threads(1)
-    facts = env_facts(env_name)
-    kwargs = hyperparams(config, env_name)
-    if facts.gamma is not None:
-        kwargs.setdefault("gamma", facts.gamma)
-    model = DENFAC("MlpPolicy", Monitor(gym.make(facts.gym_id)), seed=seed, **kwargs)
+    kwargs, _ = load_hyperparams(f"abl:{config}", env_name)  # the benchmark row's, with the env's gamma
+    kwargs.pop("policy")
+    model = DENFAC("MlpPolicy", Monitor(gym.make(env_facts(env_name).gym_id)), seed=seed, **kwargs)
     trace = Trace(episodes)
     model.learn(10**8, callback=trace)
     with open(out, "w") as f:
