@@ -7,8 +7,8 @@ is drawn from N(m + shift, Sigma), squashed by tanh, where m and Sigma = diag(st
 and covariance and shift = sqrt(2 delta) Sigma g / ||g||_Sigma, g the gradient at m of the critics' upper bound
 Q_UB = mean_j Q_j + beta_UB * (half their spread) (OAC's eqs. 12-13 with two critics; its MuJoCo values beta_UB 4.66,
 delta 23.53 as defaults, ``OAC_BETA`` / ``OAC_DELTA`` to change). Only the exploring action changes: targets, actor
-and evaluation are the library's. Patches ``DENFAC._sample_action`` (the soft actor's branch). Runs
-``benchmarks.run`` in this process (``--workers 0``); ``oac_exploration/`` holds its runs.
+and evaluation are the library's. Patches ``DENFAC._sample_action`` (the soft actor's branch, ``soft_sampling.py``).
+Runs ``benchmarks.run`` in this process (``--workers 0``); ``oac_exploration/`` holds its runs.
 
 Usage: ``python oac_exploration.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/oac_exploration``
@@ -18,26 +18,17 @@ import math
 import os
 import sys
 
-import numpy as np
+import soft_sampling  # this folder's shared patch (the script's directory is on sys.path)
 import torch as th
 
 from benchmarks import run
-from sb3_denfac.denfac import denfac as denfac_module
 
 BETA_UB = float(os.environ.get("OAC_BETA", "4.66"))
 DELTA = float(os.environ.get("OAC_DELTA", "23.53"))
 
-_sample_action = denfac_module.DENFAC._sample_action
 
-
-def sample_action(self, learning_starts, action_noise=None, n_envs=1):
-    if not self.policy.soft_actor or self.num_timesteps < learning_starts or DELTA == 0:
-        return _sample_action(self, learning_starts, action_noise, n_envs)
-    assert action_noise is None
-    self.policy.set_training_mode(False)
-    obs, _ = self.policy.obs_to_tensor(self._last_obs)
-    with th.no_grad():
-        mean, log_std, _ = self.actor.get_action_dist_params(obs)
+def draw(self, obs: th.Tensor, mean: th.Tensor, log_std: th.Tensor) -> th.Tensor:
+    """tanh of a Gaussian sample around the shifted mean m + sqrt(2 delta) Sigma g / ||g||_Sigma (OAC's eq. 12-13)."""
     pre = mean.detach().clone().requires_grad_(True)
     q1, q2 = self.critic.all_q(obs, th.tanh(pre))
     upper = (q1 + q2) / 2 + BETA_UB * (q1 - q2).abs() / 2
@@ -46,13 +37,9 @@ def sample_action(self, learning_starts, action_noise=None, n_envs=1):
         var = th.exp(2 * log_std)
         norm = th.sqrt((grad * var * grad).sum(dim=1, keepdim=True)).clamp_min(1e-12)
         shifted = mean + math.sqrt(2 * DELTA) * var * grad / norm
-        sampled = self.actor.action_dist.actions_from_params(shifted, log_std)
-    shape = (-1, *self.action_space.shape)
-    buffer_action = sampled.cpu().numpy().reshape(shape).astype(np.float32)
-    self._last_behaviour_mean = th.tanh(mean).cpu().numpy().reshape(shape).astype(np.float32)
-    return self.policy.unscale_action(buffer_action), buffer_action
+        return self.actor.action_dist.actions_from_params(shifted, log_std)
 
 
 if __name__ == "__main__":
-    denfac_module.DENFAC._sample_action = sample_action
+    soft_sampling.patch(draw)
     sys.exit(run.main(sys.argv[1:]))

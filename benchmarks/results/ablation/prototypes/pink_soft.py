@@ -1,4 +1,4 @@
-"""Prototype (ablation README, section 27): the soft actor exploring with temporally correlated (pink) noise.
+"""Prototype (ablation README, section 26): the soft actor exploring with temporally correlated (pink) noise.
 
 Sections 25-26: with the critics' minimum in the targets the soft actor holds InvertedPendulum and stops finding the
 sparse Acrobot's swing-ups, and every way tried of moving optimism into the values or the exploring action lands
@@ -9,8 +9,8 @@ Gaussian's noise this way) instead of independent draws; one sequence of ``CHUNK
 every episode start and when used up), from ``powerlaw_noise`` of ``pink_noise.py`` (section 11's prototype for the
 deterministic actor). The policy's own mean and width stay what the soft actor learned: the noise is correlated in
 time, not larger. ``PINK_BETA=0`` draws white noise through the same path (the library's sampling, another stream).
-Patches ``DENFAC._sample_action`` (the soft actor's branch); runs ``benchmarks.run`` in this process (``--workers 0``);
-``pink_soft/`` holds its runs.
+Patches ``DENFAC._sample_action`` (the soft actor's branch, ``soft_sampling.py``); runs ``benchmarks.run`` in this
+process (``--workers 0``); ``pink_soft/`` holds its runs.
 
 Usage: ``python pink_soft.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/pink_soft``
@@ -20,16 +20,14 @@ import os
 import sys
 
 import numpy as np
+import soft_sampling  # this folder's shared patch (the script's directory is on sys.path)
 import torch as th
-from pink_noise import powerlaw_noise  # this folder's section-11 prototype (the script's directory is on sys.path)
+from pink_noise import powerlaw_noise  # this folder's section-11 prototype
 
 from benchmarks import run
-from sb3_denfac.denfac import denfac as denfac_module
 
 BETA = float(os.environ.get("PINK_BETA", "1.0"))
 CHUNK = int(os.environ.get("PINK_CHUNK", "1000"))
-
-_sample_action = denfac_module.DENFAC._sample_action
 
 
 def noise(self, dim: int) -> np.ndarray:
@@ -43,22 +41,13 @@ def noise(self, dim: int) -> np.ndarray:
     return eps
 
 
-def sample_action(self, learning_starts, action_noise=None, n_envs=1):
-    if not self.policy.soft_actor or self.num_timesteps < learning_starts:
-        return _sample_action(self, learning_starts, action_noise, n_envs)
-    assert action_noise is None and n_envs == 1, "one env: one noise sequence"
-    self.policy.set_training_mode(False)
-    obs, _ = self.policy.obs_to_tensor(self._last_obs)
-    with th.no_grad():
-        mean, log_std, _ = self.actor.get_action_dist_params(obs)
-        eps = th.as_tensor(noise(self, mean.shape[-1]), dtype=mean.dtype).reshape(mean.shape)
-        sampled = th.tanh(mean + log_std.exp() * eps)
-    shape = (-1, *self.action_space.shape)
-    buffer_action = sampled.cpu().numpy().reshape(shape).astype(np.float32)
-    self._last_behaviour_mean = th.tanh(mean).cpu().numpy().reshape(shape).astype(np.float32)
-    return self.policy.unscale_action(buffer_action), buffer_action
+def draw(self, obs: th.Tensor, mean: th.Tensor, log_std: th.Tensor) -> th.Tensor:
+    """tanh(m(s) + std(s) eps_t), eps_t this step's entry of the episode's 1/f sequence."""
+    assert mean.shape[0] == 1, "one env: one noise sequence"
+    eps = th.as_tensor(noise(self, mean.shape[-1]), dtype=mean.dtype).reshape(mean.shape)
+    return th.tanh(mean + log_std.exp() * eps)
 
 
 if __name__ == "__main__":
-    denfac_module.DENFAC._sample_action = sample_action
+    soft_sampling.patch(draw)
     sys.exit(run.main(sys.argv[1:]))
