@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import ast
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -56,9 +56,14 @@ def _learning_starts(meta: dict) -> int:
 
 def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(episodes, runs) of the finished runs of the study's runs file: per (algo, env, seed), its longest budget."""
+    return load_records(store.read_runs(results_dir))
+
+
+def load_records(records: Iterable[dict]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """:func:`load` of run records already read (e.g. some rows of a runs file, ``store.read_runs``)."""
     episode_frames, run_rows = [], []
     longest: dict[tuple, dict] = {}
-    for record in store.read_runs(results_dir):
+    for record in records:
         cell = store.cell_of(record)[:3]
         if cell not in longest or record["episodes_requested"] > longest[cell]["episodes_requested"]:
             longest[cell] = record

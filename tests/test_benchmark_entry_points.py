@@ -170,6 +170,20 @@ def test_long_hopper_record_script():
     assert abs(row["q"]) < 1000
 
 
+def test_default_choice_record_script(monkeypatch, capsys):
+    """``benchmarks/results/ablation/default_choice.py`` (section 27) reads the committed runs of every compared row on
+    every env and seed (one run per cell) and prints a probability of improvement per candidate and measure."""
+    from benchmarks.results.ablation import default_choice
+
+    monkeypatch.setattr(stats, "REPS", 50)
+    runs = default_choice.load_runs()
+    cells = runs.groupby("algo").size()
+    assert dict(cells) == dict.fromkeys(set(default_choice.NAMES.values()), 8 * 5)
+    default_choice.main()
+    out = capsys.readouterr().out
+    assert out.count("(5 vs 5)") == 2 * 4 * len(default_choice.MEASURES) and "–" not in out
+
+
 @pytest.mark.parametrize(
     ("args", "cause"),
     [
