@@ -9,7 +9,8 @@ mean for the actor; this patch does the same for DENFAC's soft actor (``Updater.
 ``critic.target_q(obs, actions, ACTOR_Q)``; ``ACTOR_Q`` = "mean", or "min" as the library). Runs ``benchmarks.run``
 in this process (use ``--workers 0``); ``actor_mean/`` holds its runs.
 
-Usage: ``python actor_mean.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``python -m benchmarks.results.ablation.prototypes.actor_mean
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/actor_mean``
 """
 

@@ -8,7 +8,8 @@ bootstrap value only: the soft actor still ascends the minimum. The patch replac
 the critics when ``critic_target="min"`` (the configurations run here use the fast updater; asserted). Runs
 ``benchmarks.run`` in this process (use ``--workers 0``); ``blend_targets/`` holds its runs.
 
-Usage: ``BLEND=0.5 python blend_targets.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``BLEND=0.5 python -m benchmarks.results.ablation.prototypes.blend_targets
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/blend_targets``
 """
 

@@ -15,7 +15,8 @@ samples for the update (rewards -> the n-step sums, next observations -> s_{i+m}
 DENFAC's ``gamma (1 - done)`` is gamma^m (1 - d)); ``bootstrap_bounds`` keeps reading the one-step rewards. Runs
 ``benchmarks.run`` in this process (use ``--workers 0``); ``n_step/`` holds its runs. ``NSTEP`` sets n (default 3).
 
-Usage: ``NSTEP=3 python n_step.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``NSTEP=3 python -m benchmarks.results.ablation.prototypes.n_step
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/n_step``
 """
 

@@ -10,7 +10,8 @@ delta 23.53 as defaults, ``OAC_BETA`` / ``OAC_DELTA`` to change). Only the explo
 and evaluation are the library's. Patches ``DENFAC._sample_action`` (the soft actor's branch, ``soft_sampling.py``).
 Runs ``benchmarks.run`` in this process (``--workers 0``); ``oac_exploration/`` holds its runs.
 
-Usage: ``python oac_exploration.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``python -m benchmarks.results.ablation.prototypes.oac_exploration
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/oac_exploration``
 """
 
@@ -18,10 +19,10 @@ import math
 import os
 import sys
 
-import soft_sampling  # this folder's shared patch (the script's directory is on sys.path)
 import torch as th
 
 from benchmarks import run
+from benchmarks.results.ablation.prototypes import soft_sampling
 
 BETA_UB = float(os.environ.get("OAC_BETA", "4.66"))
 DELTA = float(os.environ.get("OAC_DELTA", "23.53"))

@@ -12,7 +12,8 @@ time, not larger. ``PINK_BETA=0`` draws white noise through the same path (the l
 Patches ``DENFAC._sample_action`` (the soft actor's branch, ``soft_sampling.py``); runs ``benchmarks.run`` in this
 process (``--workers 0``); ``pink_soft/`` holds its runs.
 
-Usage: ``python pink_soft.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``python -m benchmarks.results.ablation.prototypes.pink_soft
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/pink_soft``
 """
 
@@ -20,11 +21,11 @@ import os
 import sys
 
 import numpy as np
-import soft_sampling  # this folder's shared patch (the script's directory is on sys.path)
 import torch as th
-from pink_noise import powerlaw_noise  # this folder's section-11 prototype
 
 from benchmarks import run
+from benchmarks.results.ablation.prototypes import soft_sampling
+from benchmarks.results.ablation.prototypes.pink_noise import powerlaw_noise  # section 11's prototype
 
 BETA = float(os.environ.get("PINK_BETA", "1.0"))
 CHUNK = int(os.environ.get("PINK_CHUNK", "1000"))

@@ -1,7 +1,8 @@
 """Shared by the prototypes that change how the soft actor draws its exploring action (``oac_exploration.py``,
 ``pink_soft.py``): :func:`patch` replaces the soft actor's branch of ``DENFAC._sample_action`` with one whose squashed
-action comes from ``draw(model, mean, log_std)`` (the actor's pre-tanh mean and clamped log std, no gradient); the
-rest (warm-up, the deterministic actor, the buffer's action and behaviour mean) is the library's."""
+action comes from ``draw(model, obs, mean, log_std)`` (the observation tensor, the actor's pre-tanh mean and clamped
+log std, computed without gradient); the rest (warm-up, the deterministic actor, the buffer's action and behaviour
+mean) is the library's."""
 
 from collections.abc import Callable
 

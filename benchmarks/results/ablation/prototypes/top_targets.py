@@ -12,7 +12,8 @@ only, the soft actor still ascends the minimum. Patches the fast updater's combi
 ``critic_target="min"`` (asserted) and ``DENFAC.train``. Runs ``benchmarks.run`` in this process (``--workers 0``);
 ``top_targets/`` holds its runs; ``TOP_TRACE=path`` appends one JSON line per update (episode return, arm, weights).
 
-Usage: ``python top_targets.py --algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
+Usage: ``python -m benchmarks.results.ablation.prototypes.top_targets
+--algos abl:soft+min+K20 --envs acrobot --seeds 0 1 2 --workers 0
 --results benchmarks/results/ablation/prototypes/top_targets``
 """
 

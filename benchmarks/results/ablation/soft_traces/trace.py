@@ -6,8 +6,8 @@ standard deviation (before tanh) over the states of D: median and 90th percentil
 A separate run from the benchmark's (plain ``Monitor`` env, no evaluations), so it does not reproduce a sweep run's
 trajectory; it shows what the values and the policy do over one run.
 
-Usage: ``python trace.py soft+min+K20 acrobot 0 100 out.jsonl`` (configuration of ``benchmarks.ablation``, short env
-name or Gymnasium id, seed, episodes, output file).
+Usage: ``python -m benchmarks.results.ablation.soft_traces.trace soft+min+K20 acrobot 0 100 out.jsonl``
+(configuration of ``benchmarks.ablation``, short env name or Gymnasium id, seed, episodes, output file).
 """
 
 import json
