@@ -37,6 +37,32 @@ def test_fitted_iterations(critic_steps, ratio, n_new, expected):
     assert fitted_iterations(10, critic_steps, ratio, n_new) == expected
 
 
+@pytest.mark.parametrize(("ratio", "n_new", "expected"), [(1.0, 500, 100), (4.0, 1000, 800), (0.5, 3, 1), (2.0, 12, 5)])
+def test_the_dial_without_a_cap(ratio, n_new, expected):
+    """K = None: rho alone sets the update, ceil(rho n / critic_steps) iterations of 5 critic steps, at least 1."""
+    assert fitted_iterations(None, 5, ratio, n_new) == expected
+
+
+def test_no_cap_needs_the_ratio(target_action_env):
+    with pytest.raises(ValueError, match="n_fitted_iterations=None.*update_to_data_ratio"):
+        DENFAC("MlpPolicy", target_action_env(), n_fitted_iterations=None)
+
+
+@pytest.mark.parametrize("update_path", ["fast", "plain"])
+def test_the_dial_grows_the_update_past_k(tmp_path, target_action_env, update_path):
+    """rho = 4 without a cap: 10-step episodes get 8 iterations of 5 critic steps (40 steps), past K = 4's 20; the
+    saved model keeps its uncapped K and resumes with it."""
+    kwargs = {**SMALL, "n_fitted_iterations": None}
+    model = DENFAC("MlpPolicy", target_action_env(), update_to_data_ratio=4.0, update_path=update_path, **kwargs)
+    model.learn(20)
+    assert set(_critic_adam_steps(model)) == {2 * 8 * 5}
+    model.save(tmp_path / "model.zip")
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
+    assert loaded.n_fitted_iterations is None and loaded.update_to_data_ratio == 4.0
+    loaded.learn(10, reset_num_timesteps=False)
+    assert set(_critic_adam_steps(loaded)) == {3 * 8 * 5}
+
+
 @pytest.mark.parametrize("update_path", ["fast", "plain"])
 def test_updates_scale_with_the_new_transitions(target_action_env, update_path):
     """Episodes of 10 steps, rho = 1, 5 critic steps: 2 fitted iterations (10 critic steps) per episode instead of K = 4;

@@ -36,7 +36,7 @@ def reset_parameters_(module: nn.Module, init: str = "paper") -> None:
     if init not in INITS:
         raise ValueError(f"init must be one of {INITS}, got {init!r}")
     for layer in module.modules():
-        if isinstance(layer, (nn.Linear, nn.BatchNorm1d)):
+        if isinstance(layer, (nn.Linear, nn.BatchNorm1d, nn.LayerNorm)):
             layer.reset_parameters()
     if init == "paper":
         paper_init_(module)
@@ -50,6 +50,7 @@ def create_bn_mlp(
     activation_fn: type[nn.Module] = nn.LeakyReLU,
     bn_momentum: float = 0.1,
     init: str = "paper",
+    layer_norm: bool = False,
 ) -> nn.Sequential:
     """Build ``input -> net_arch... -> output`` with a linear output layer and the paper's batch-norm placement.
 
@@ -60,6 +61,8 @@ def create_bn_mlp(
     :param activation_fn: hidden activation (paper: leaky ReLU, slope 0.01).
     :param bn_momentum: PyTorch BatchNorm1d momentum for the running statistics.
     :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch's initialisation).
+    :param layer_norm: LayerNorm after every hidden linear layer, before its activation (Ba et al. 2016; the critics of
+        DroQ, BRO and sbx's ``layer_norm``): each hidden layer's pre-activations keep unit scale however long the fit.
     """
     if init not in INITS:
         raise ValueError(f"init must be one of {INITS}, got {init!r}")
@@ -72,6 +75,8 @@ def create_bn_mlp(
         if batch_norm and not is_last:
             layers.append(nn.BatchNorm1d(sizes[i], momentum=bn_momentum))
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if layer_norm and not is_last:
+            layers.append(nn.LayerNorm(sizes[i + 1]))
         if not is_last:
             layers.append(activation_fn())
     net = nn.Sequential(*layers)

@@ -36,7 +36,11 @@ a short episode. With rho, the update after an episode (rollout) of n steps (SB3
 
     K_e = min(K, ceil(rho n / critic_steps))   fitted iterations,
 
-i.e. about rho critic steps per collected step, never more than Algorithm 1's K iterations.
+i.e. about rho critic steps per collected step, never more than K iterations; with K = None (``n_fitted_iterations``)
+there is no cap and rho alone sets the update's size: this is DENFAC's compute dial, from a fraction of a critic step
+per env step to the frontier's 1-20 (REDQ, DroQ: 20). Each fitted iteration keeps Algorithm 1's shape (targets from
+(Q_{k-1}, pi_{k-1}), ``critic_steps`` critic steps, G actor steps), so a larger rho means more iterations, each one
+refreshing the targets of eq. (4), not longer ones.
 
 **Bootstrap bounds** (``bootstrap_bounds``, off by default). No discounted return of at least one reward in
 [r_min, r_max] leaves
@@ -85,12 +89,14 @@ def check_options(
     return prioritized, alpha, beta, eps, proximal
 
 
-def fitted_iterations(n_fitted_iterations: int, critic_steps: int, ratio: float | None, n_steps: int) -> int:
-    """K_e of the update after a rollout of ``n_steps`` steps (module docstring); ``ratio`` None: always K."""
+def fitted_iterations(n_fitted_iterations: int | None, critic_steps: int, ratio: float | None, n_steps: int) -> int:
+    """K_e of the update after a rollout of ``n_steps`` steps (module docstring); ``ratio`` None: always K;
+    ``n_fitted_iterations`` None: no cap."""
     if ratio is None:
+        assert n_fitted_iterations is not None  # refused by DENFAC's constructor
         return n_fitted_iterations
-    wanted = round(ratio * n_steps / critic_steps, 9)  # 0.07 * 100 / 7 is 1.0000000000000002 in floats
-    return max(1, min(n_fitted_iterations, math.ceil(wanted)))
+    wanted = math.ceil(round(ratio * n_steps / critic_steps, 9))  # 0.07 * 100 / 7 is 1.0000000000000002 in floats
+    return max(1, wanted if n_fitted_iterations is None else min(n_fitted_iterations, wanted))
 
 
 class PrioritisedSampler:

@@ -24,7 +24,7 @@ from stable_baselines3.sac.policies import Actor as SACActor
 from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
-from sb3_denfac.common.checks import check_number
+from sb3_denfac.common.checks import check_bool, check_number
 from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
 
 #: ``net_arch`` of :class:`DENFACPolicy` when it is None (paper: pi=[20], qf=[50, 7]).
@@ -75,6 +75,7 @@ class DENFACCritic(BaseModel):
     :param init: "paper" or "default"
     :param normalize_images: whether to normalise images
     :param n_critics: number of Q networks (paper: 1)
+    :param layer_norm: LayerNorm after every hidden layer of each Q network (:func:`~sb3_denfac.common.networks.create_bn_mlp`)
     """
 
     def __init__(
@@ -90,6 +91,7 @@ class DENFACCritic(BaseModel):
         init: str = "default",
         normalize_images: bool = True,
         n_critics: int = 2,
+        layer_norm: bool = False,
     ):
         super().__init__(
             observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
@@ -98,7 +100,16 @@ class DENFACCritic(BaseModel):
         action_dim = get_action_dim(self.action_space)
 
         def q_network() -> nn.Sequential:
-            return create_bn_mlp(features_dim + action_dim, 1, net_arch, batch_norm, activation_fn, bn_momentum, init)  # type: ignore[arg-type]
+            return create_bn_mlp(
+                features_dim + action_dim,
+                1,
+                net_arch,
+                batch_norm,
+                activation_fn,
+                bn_momentum,
+                init,
+                layer_norm,  # type: ignore[arg-type]
+            )
 
         self.n_critics = n_critics
         self.qf = q_network()  # Q_1 (the only one of files saved before n_critics existed)
@@ -170,6 +181,8 @@ class DENFACPolicy(BasePolicy):
     :param ent_coef: alpha, the entropy coefficient of the soft actor (SB3's SAC ``ent_coef``): "auto" (tuned, from
         1), "auto_<x>" (tuned, from x) or a float (fixed); unused without ``soft_actor``
     :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18); "auto": -dim(A)
+    :param layer_norm: LayerNorm after every hidden layer of the critic's Q networks (default False; sbx's SAC
+        ``layer_norm``, the critics of DroQ and BRO): keeps the values' regression well scaled over many fitted steps
     """
 
     actor: DENFACActor | DENFACSoftActor
@@ -197,6 +210,7 @@ class DENFACPolicy(BasePolicy):
         soft_actor: bool = False,
         ent_coef: str | float = "auto",
         target_entropy: str | float = "auto",
+        layer_norm: bool = False,
     ):
         super().__init__(
             observation_space,
@@ -236,7 +250,8 @@ class DENFACPolicy(BasePolicy):
             normalize_images=normalize_images,
         )
         self.actor_kwargs = {**common, "net_arch": archs["pi"], "sigma": sigma}
-        self.critic_kwargs = {**common, "net_arch": archs["qf"], "n_critics": n_critics}
+        self.layer_norm = check_bool("layer_norm", layer_norm)
+        self.critic_kwargs = {**common, "net_arch": archs["qf"], "n_critics": n_critics, "layer_norm": self.layer_norm}
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
@@ -309,6 +324,7 @@ class DENFACPolicy(BasePolicy):
                 soft_actor=self.soft_actor,
                 ent_coef=self.ent_coef,
                 target_entropy=self.target_entropy,
+                layer_norm=self.layer_norm,
             )
         )
         return data

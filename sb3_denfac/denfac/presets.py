@@ -39,6 +39,22 @@ PAPER: dict[str, Any] = {
 }
 
 
+#: The compute dial's data-efficient end (docs/denfac.md, "The compute dial"): about ``update_to_data_ratio`` critic
+#: steps per collected env step, without a cap on the fitted iterations (:mod:`~.options`), and layer-normalised critics
+#: (:func:`~sb3_denfac.common.networks.create_bn_mlp`'s ``layer_norm``) that keep eq. (4)'s regression well scaled over
+#: the many more fitted iterations. Everything else is the default's.
+DATA_EFFICIENT: dict[str, Any] = {
+    "update_to_data_ratio": 1.0,
+    "n_fitted_iterations": None,
+    "policy_kwargs": {"layer_norm": True},
+}
+
+
+def data_efficient(**overrides: Any) -> dict[str, Any]:
+    """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=4``."""
+    return with_overrides(DATA_EFFICIENT, overrides)
+
+
 def with_overrides(preset: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """``preset`` with ``overrides``: a mapping in both (``policy_kwargs``, its ``net_arch``) is merged key by key, any
     other value of ``overrides`` replaces the preset's. Neither argument is modified."""

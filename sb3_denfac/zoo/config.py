@@ -67,7 +67,10 @@ class ZooConfigError(ValueError):
 
 #: ``preset: <name>`` in a YAML entry: the constructor arguments the entry starts from; the entry's own keys override
 #: them, ``policy_kwargs`` merged key by key (:func:`expand_preset`). Name -> (its algorithm, "module:attribute").
-PRESETS: dict[str, tuple[str, str]] = {"paper": ("denfac", "sb3_denfac.denfac.presets:PAPER")}
+PRESETS: dict[str, tuple[str, str]] = {
+    "paper": ("denfac", "sb3_denfac.denfac.presets:PAPER"),
+    "data_efficient": ("denfac", "sb3_denfac.denfac.presets:DATA_EFFICIENT"),
+}
 
 
 def algorithm_class(name: str) -> type:

@@ -1,0 +1,88 @@
+"""DENFAC's data-efficient end: the critics' layer norm (``policy_kwargs=dict(layer_norm=True)``) and
+:data:`sb3_denfac.denfac.presets.DATA_EFFICIENT` (the compute dial without a cap, and layer-normalised critics)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch as th
+from torch import nn
+
+from sb3_denfac.denfac import DENFAC
+from sb3_denfac.denfac.presets import DATA_EFFICIENT, data_efficient
+from sb3_denfac.denfac.updaters import FitSettings, make_updater
+from sb3_denfac.zoo.config import select_entry
+
+SMALL = dict(critic_steps=5, actor_steps=5, batch_size=32, seed=1)
+
+
+def _layer_norms(net: nn.Module) -> list[nn.LayerNorm]:
+    return [m for m in net.modules() if isinstance(m, nn.LayerNorm)]
+
+
+def test_layer_norm_is_in_every_hidden_layer_of_each_critic_only(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), policy_kwargs=dict(layer_norm=True, net_arch=[16, 8]))
+    for q_net in model.critic.q_networks:
+        assert [ln.normalized_shape for ln in _layer_norms(q_net)] == [(16,), (8,)]
+        layers = list(q_net)
+        for i, layer in enumerate(layers[:-1]):  # Linear -> LayerNorm -> activation
+            if isinstance(layer, nn.LayerNorm):
+                assert isinstance(layers[i - 1], nn.Linear) and isinstance(layers[i + 1], nn.LeakyReLU)
+    assert _layer_norms(model.actor) == []
+    assert _layer_norms(DENFAC("MlpPolicy", target_action_env()).critic) == []  # off by default
+
+
+def test_layer_norm_runs_on_the_autograd_updater_and_says_why(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), policy_kwargs=dict(layer_norm=True))
+    choice = make_updater(model.policy, FitSettings.of(model), "auto")
+    assert type(choice.updater).__name__ == "AutogradUpdater" and "default MLP networks" in choice.fast_refused
+    fast = DENFAC("MlpPolicy", target_action_env(), policy_kwargs=dict(layer_norm=True), update_path="fast", **SMALL)
+    with pytest.raises(ValueError, match="default MLP networks"):
+        fast.learn(10)  # the first update
+
+
+def test_layer_norm_checks_its_value(target_action_env):
+    with pytest.raises(ValueError, match="layer_norm must be True or False"):
+        DENFAC("MlpPolicy", target_action_env(), policy_kwargs=dict(layer_norm="yes"))
+
+
+def test_critic_reset_reinitialises_the_layer_norms(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), policy_kwargs=dict(layer_norm=True), reset_critic=True, **SMALL)
+    model.learn(20)  # two updates, each resetting the critic at every fitted iteration before fitting it
+    ln = _layer_norms(model.critic)[0]
+    assert not th.equal(ln.weight, th.ones_like(ln.weight))  # fitted since the last reset
+    model.policy.reset_critic()
+    assert th.equal(ln.weight, th.ones_like(ln.weight)) and th.equal(ln.bias, th.zeros_like(ln.bias))
+
+
+def test_save_load_keeps_the_layer_norm(tmp_path, target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), **data_efficient(**SMALL)).learn(20)
+    model.save(tmp_path / "model.zip")
+    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
+    assert loaded.policy.layer_norm and len(_layer_norms(loaded.critic)) == 4
+    obs = np.stack([target_action_env().observation_space.sample() for _ in range(8)])
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+
+
+def test_the_preset_is_the_dial_without_a_cap_and_layer_norm(target_action_env):
+    model = DENFAC("MlpPolicy", target_action_env(), **DATA_EFFICIENT)
+    assert model.n_fitted_iterations is None and model.update_to_data_ratio == 1.0 and model.policy.layer_norm
+    assert data_efficient(update_to_data_ratio=4)["update_to_data_ratio"] == 4
+    assert DATA_EFFICIENT["update_to_data_ratio"] == 1.0  # with_overrides copies
+
+
+def test_the_zoo_expands_the_preset():
+    entry = select_entry({"Pendulum-v1": {"policy": "MlpPolicy", "preset": "data_efficient"}}, "Pendulum-v1", "f.yml")
+    assert entry["n_fitted_iterations"] is None and entry["policy_kwargs"] == {"layer_norm": True}
+
+
+def test_the_preset_learns_the_target_action(target_action_env):
+    """10-step episodes, one critic step per env step (2 iterations of 5 steps) on layer-normalised critics: the actor
+    moves to the rewarded action."""
+    env = target_action_env()
+    model = DENFAC("MlpPolicy", env, gamma=0.9, **data_efficient(**SMALL))
+    obs = np.stack([env.observation_space.sample() for _ in range(64)])
+    start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    model.learn(300)
+    end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    assert end < 0.1 and end < start / 2, (start, end)
