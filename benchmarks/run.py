@@ -116,7 +116,7 @@ def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dic
                 on_result(ray.get(done[0]))
             except ray.exceptions.RayError as error:  # retries exhausted: recorded as failed, redone by a rerun
                 task = task_of[done[0]]
-                key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+                key = task_module.run_key(task)
                 on_result({**key, "status": "failed", "error": f"{type(error).__name__}: {error}", "log": ""})
     finally:
         ray.shutdown()  # disconnects from a cluster; stops a "local" one
@@ -172,6 +172,7 @@ def sweep(
     diagnostics_every: int | None = None,
     device: str = "cpu",
     checkpoint_every: float = 600.0,
+    timesteps: int | None = None,
 ) -> dict[str, list]:
     """Run the cells of :func:`select_cells` that ``results_dir`` does not hold yet; return ``{"done", "skipped",
     "failed"}`` lists of tasks.
@@ -182,6 +183,8 @@ def sweep(
     ``diagnostics_every``: record DENFAC's critic-fit diagnostics every that many episodes (0: none; None: the
     suite's, else none).
     ``device``: the torch device of every run (``"cuda"`` on a GPU machine; each worker its own process there).
+    ``timesteps``: a budget of that many env steps for every cell instead (evaluated every tenth of it, or at the
+    suite's interval where its budget is one of env steps).
     ``checkpoint_every``: a run saves itself (``<results_dir>/checkpoints/``) after the first episode's update past
     every that many seconds, and a rerun resumes it from there (0: no checkpoints; a killed run is then redone).
     """
@@ -205,7 +208,12 @@ def sweep(
     git = task_module.git_state()  # the code this sweep loads; a commit made while it runs does not change it
     for algo, env, seed in cells:
         budget = suites.budget(env, (episodes or {}).get(env), the_suite)
-        if budget.episodes < 1:
+        if timesteps is not None:
+            if timesteps < 1 or episodes:
+                raise ValueError(f"--timesteps must be >= 1 and without --episodes, got {timesteps} ({episodes=})")
+            every = budget.eval_every if budget.timesteps else max(1, timesteps // 10)
+            budget = suites.Budget.steps(timesteps, every, budget.eval_episodes)
+        if budget.episodes < 1 and budget.timesteps is None:
             raise ValueError(f"--episodes for {env} must be >= 1, got {budget.episodes}")
         hyperparams, source = suites.load_hyperparams(algo, env, hyperparams_dirs)
         task = {
@@ -217,6 +225,7 @@ def sweep(
             "env": env,
             "seed": int(seed),
             "episodes": budget.episodes,
+            "timesteps": budget.timesteps,
             "eval_every": budget.eval_every,
             "eval_episodes": budget.eval_episodes,
             "eval_kwargs": dict(budget.eval_kwargs),
@@ -225,7 +234,8 @@ def sweep(
             "checkpoint_dir": str(results_dir / "checkpoints") if checkpoint_every > 0 else None,
             "checkpoint_every": checkpoint_every if checkpoint_every > 0 else None,
         }
-        (status["skipped"] if (algo, env, int(seed), budget.episodes) in finished else tasks).append(task)
+        cell = (algo, env, int(seed), budget.episodes, budget.timesteps)
+        (status["skipped"] if cell in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
     if verbose:
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
@@ -236,6 +246,7 @@ def sweep(
         "suite": suite,
         "cells": [[a, e, s] for a, e, s in cells],
         "episodes": {t["env"]: t["episodes"] for t in tasks + status["skipped"]},
+        "timesteps": {t["env"]: t["timesteps"] for t in tasks + status["skipped"] if t["timesteps"]},
         "workers": workers,
         "ray_address": ray_address,
         "started_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -248,7 +259,7 @@ def sweep(
         if cell in finished:  # a Ray task retried after its first result was written: keep the first
             return
         store.append_record(results_dir, record)
-        t = {"algo": cell[0], "env": cell[1], "seed": cell[2], "episodes": cell[3]}
+        t = {"algo": cell[0], "env": cell[1], "seed": cell[2], "episodes": cell[3], "timesteps": cell[4]}
         if record["status"] != "done":
             status["failed"].append(t)
             if verbose:
@@ -263,10 +274,14 @@ def sweep(
             write_zoo_evaluations(record, Path(zoo_logs))
         if verbose:
             best = record["episodes"]["best_so_far"][-1] if record["n_episodes"] else float("nan")
+            measure = f"best {best:.4g}"
+            if record.get("timesteps_requested") and record["evaluations"]:  # the field's measure: the last evaluation
+                scores = record["evaluations"][-1]["scores"]
+                measure = f"final evaluation {sum(scores) / len(scores):.4g}"
             print(
                 f"{time.strftime('%H:%M:%S')} done {cell[0]} {cell[1]} seed {cell[2]}: {record['n_episodes']} episodes, "
                 f"{record['timesteps']} steps, {record['gradient_steps']} gradient steps, {record['cpu_time']:.1f} CPU s, "
-                f"best {best:.4g} ({record['hyperparams_source']})",
+                f"{measure} ({record['hyperparams_source']})",
                 flush=True,
             )
 
@@ -335,6 +350,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--episodes", nargs="+", default=None, help="override the budgets: N for all envs, ENV=N for one (e.g. 5 pendulum=3)"
     )
+    parser.add_argument(
+        "--timesteps", type=int, default=None, help="a budget of N env steps for every env instead of episodes"
+    )
     parser.add_argument("--results", default=None, help="results folder (default: results/<the suite's study>)")
     parser.add_argument("--hyperparams", nargs="*", default=[], help="folders searched first for <algo>.yml")
     parser.add_argument("--workers", type=int, default=1, help="process pool size (0: in this process)")
@@ -380,6 +398,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         diagnostics_every=args.diagnostics_every,
         device=args.device,
         checkpoint_every=args.checkpoint_every,
+        timesteps=args.timesteps,
     )
     print(f"finished: {len(status['done'])} done, {len(status['skipped'])} skipped, {len(status['failed'])} failed")
     return 1 if status["failed"] else 0

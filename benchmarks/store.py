@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any
 
 RUNS_FILE = "runs.jsonl.gz"
-Cell = tuple[str, str, int, int]  # algo, env, seed, episodes asked for (a shorter budget is another run)
+#: algo, env, seed, episodes asked for, env steps asked for (None: an episode budget); another budget is another run
+Cell = tuple[str, str, int, int, int | None]
 
 
 def runs_path(results_dir: str | Path) -> Path:
@@ -101,7 +102,8 @@ def finished_cells(results_dir: str | Path) -> set[Cell]:
 
 
 def cell_of(record: dict[str, Any]) -> Cell:
-    return record["algo"], record["env"], int(record["seed"]), int(record["episodes_requested"])
+    steps = record.get("timesteps_requested")
+    return record["algo"], record["env"], int(record["seed"]), int(record["episodes_requested"]), steps and int(steps)
 
 
 def write_records(results_dir: str | Path, records: list[dict[str, Any]]) -> None:

@@ -90,6 +90,8 @@ ALGOS: dict[str, Algo] = {
                 ("actor_steps", 12),
             ),
         ),  # fmt: skip
+        # the compute dial's data-efficient end (sb3_denfac.denfac.presets.DATA_EFFICIENT; configs/)
+        Algo("denfac_data_efficient", "denfac", "DENFAC (data-efficient preset)", "paper"),
         Algo("nfac", "nfac", "NFAC+", "paper"),
         Algo("cacla", "cacla", "CACLA+", "paper"),
         Algo("cmaes", "cmaes", "CMA-ES", "paper"),
@@ -97,6 +99,12 @@ ALGOS: dict[str, Algo] = {
         Algo("td3", "td3", "SB3 TD3", "peer"),
         Algo("sac", "sac", "SB3 SAC", "peer"),
         Algo("crossq", "crossq", "sb3-contrib CrossQ", "peer"),
+        # the RL Zoo's MuJoCo settings (its `HalfCheetah-v3: &mujoco-defaults` entry: 10k random warm-up steps, then
+        # SB3's defaults, one gradient step per env step), for the field's 100k-step budget; the `sac` row keeps the
+        # short warm-up of the episode budgets
+        Algo(
+            "sac_zoo", "sac", "SB3 SAC (RL Zoo MuJoCo settings)", "peer", base="sac", overrides=(("learning_starts", 10_000),)
+        ),
         Algo("sac_matched", "sac", "SB3 SAC on DENFAC's schedule", "peer", base="sac", overrides=MATCHED_SCHEDULE),
         Algo("td3_matched", "td3", "SB3 TD3 on DENFAC's schedule", "peer", base="td3", overrides=MATCHED_SCHEDULE),
         Algo("sac_utd20", "sac", "SB3 SAC, 20 steps per env step", "peer", base="sac", overrides=HIGH_UTD),
@@ -125,12 +133,22 @@ ALGOS: dict[str, Algo] = {
 @dataclass(frozen=True)
 class Budget:
     """Episodes per run, and a deterministic evaluation of ``eval_episodes`` episodes every ``eval_every`` episodes on
-    the env made with ``eval_kwargs``."""
+    the env made with ``eval_kwargs``.
+
+    With ``timesteps`` (the field's budgets, e.g. 100k env steps on MuJoCo) a run lasts that many env steps instead,
+    ``episodes`` is 0 (no episode count), and ``eval_every`` counts env steps: the policy is evaluated at the first
+    episode end at or after every multiple, and once more at the budget."""
 
     episodes: int
     eval_every: int = 10
     eval_episodes: int = 1  # 1 where the start state is deterministic (the evaluation is then deterministic too)
     eval_kwargs: tuple[tuple[str, Any], ...] = ()
+    timesteps: int | None = None
+
+    @staticmethod
+    def steps(timesteps: int, eval_every: int, eval_episodes: int) -> Budget:
+        """A budget of ``timesteps`` env steps, evaluated every ``eval_every`` steps."""
+        return Budget(0, eval_every, eval_episodes, (), timesteps)
 
 
 BUDGETS: dict[str, Budget] = {
@@ -151,6 +169,10 @@ FIGURE3_ENVS = ("acrobot", "cartpole", "halfcheetah", "pendulum", "invertedpendu
 GENERALISATION_ENVS = ("acrobot", "cartpole", "halfcheetah", "pendulum", "invertedpendulum")
 #: The matched-schedule comparison: the generalisation envs and two held-out MuJoCo tasks.
 MATCHED_ENVS = (*GENERALISATION_ENVS, "hopper", "reacher")
+#: The field's data-efficiency benchmark: Gymnasium MuJoCo at 100k env steps, 10 deterministic evaluation episodes
+#: every 10k steps (docs/benchmark.md, "The field's budget").
+MUJOCO100K_ENVS = ("HalfCheetah-v5", "Hopper-v5", "Walker2d-v5", "Ant-v5")
+MUJOCO100K_BUDGET = Budget.steps(100_000, 10_000, 10)
 # A variant env takes the YAML entries of the env it varies (the YAML files are keyed by the paper's env ids).
 HYPERPARAMS_OF = {"acrobot75": "acrobot"}
 
@@ -249,6 +271,16 @@ SUITES: dict[str, Suite] = {
             "envs where its cost fits",
         ),
         Suite(
+            "mujoco100k",
+            MUJOCO100K_ENVS,
+            ((("denfac_default", "denfac_data_efficient"), _FIVE), (("sac_zoo",), (0, 1))),
+            "the field's data-efficiency benchmark: Gymnasium MuJoCo at 100k env steps, 10 deterministic evaluation "
+            "episodes every 10k steps; DENFAC's default and its data-efficient preset against SB3 SAC with the RL Zoo's "
+            "MuJoCo settings, with the published 100k-step figures as reference lines",
+            study="mujoco100k",
+            budgets=tuple((env, MUJOCO100K_BUDGET) for env in MUJOCO100K_ENVS),
+        ),
+        Suite(
             "denfac_cartpole",
             ("cartpole",),
             ((("denfac",), _FIVE),),
@@ -263,6 +295,8 @@ def budget(env: str, episodes: int | None = None, suite: Suite | None = None) ->
     episodes, 1 evaluation episode."""
     base = dict(suite.budgets).get(env) if suite is not None else None
     base = base or BUDGETS.get(env, Budget(100))
+    if episodes is not None and base.timesteps is not None:
+        raise ValueError(f"--episodes: {env}'s budget in this suite is {base.timesteps} env steps, not episodes")
     return base if episodes is None else Budget(episodes, base.eval_every, base.eval_episodes, base.eval_kwargs)
 
 

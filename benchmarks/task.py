@@ -51,7 +51,9 @@ class RunClock(BaseCallback):
     """CPU seconds of the training process at each episode end, and the periodic deterministic evaluations.
 
     :param eval_env: env for the evaluations (``None``: no evaluation).
-    :param eval_every: evaluate after every ``eval_every``-th episode and after episode ``max_episodes``.
+    :param eval_every: evaluate after every ``eval_every``-th episode and after episode ``max_episodes``; with
+        ``in_steps``, at the first episode end at or after every multiple of ``eval_every`` env steps (the run then
+        calls :meth:`evaluate` once more at its budget).
     """
 
     def __init__(
@@ -61,9 +63,10 @@ class RunClock(BaseCallback):
         eval_episodes: int = 1,
         max_episodes: int = 0,
         progress_path: Path | None = None,
+        in_steps: bool = False,
     ):
         super().__init__()
-        self.progress_path = progress_path
+        self.progress_path, self.in_steps = progress_path, in_steps
         self.eval_env, self.eval_every, self.eval_episodes, self.max_episodes = (
             eval_env,
             eval_every,
@@ -90,16 +93,30 @@ class RunClock(BaseCallback):
                 continue
             self.cpu_times.append(self.training_cpu())
             episode = len(self.cpu_times)
-            if self.eval_env is not None and (episode % self.eval_every == 0 or episode == self.max_episodes):
-                before = time.process_time()
-                scores = evaluate(self.model, self.eval_env, self.eval_episodes)
-                self.eval_cpu_time += time.process_time() - before
-                self.evaluations.append({"episode": episode, "scores": scores})
+            if self.in_steps:  # the evaluation at the budget comes after learn() returns, after the last update
+                due = self.next_evaluation_step() <= self.num_timesteps < self.model._total_timesteps
+            else:
+                due = episode % self.eval_every == 0 or episode == self.max_episodes
+            if self.eval_env is not None and due:
+                self.evaluate()
             if self.progress_path is not None:
                 progress = {"episodes": episode, "timesteps": self.num_timesteps, "cpu_time": self.cpu_times[-1]}
                 progress["wall_time"] = time.perf_counter() - self._wall_start + self.wall_offset
                 replace_file(self.progress_path, json.dumps(progress).encode())
         return True
+
+    def next_evaluation_step(self) -> int:
+        """The env step count of the next evaluation of a step budget: the first multiple of ``eval_every`` past the
+        last evaluation (read from ``evaluations``, so a resumed run goes on where it stopped)."""
+        last = self.evaluations[-1]["timesteps"] if self.evaluations else 0
+        return (last // self.eval_every + 1) * self.eval_every
+
+    def evaluate(self) -> None:
+        """Evaluate the policy now (its CPU seconds left out of training's), recorded with the episode and step."""
+        before = time.process_time()
+        scores = evaluate(self.model, self.eval_env, self.eval_episodes)
+        self.eval_cpu_time += time.process_time() - before
+        self.evaluations.append({"episode": len(self.cpu_times), "timesteps": int(self.model.num_timesteps), "scores": scores})
 
 
 def replace_file(path: Path, data: bytes) -> None:
@@ -267,7 +284,8 @@ def checkpoint_folder(task: dict[str, Any]) -> Path | None:
     """Where the run of ``task`` keeps its checkpoint: one folder per cell under ``task["checkpoint_dir"]``."""
     if not task.get("checkpoint_dir"):
         return None
-    return Path(task["checkpoint_dir"]) / f"{task['algo'].replace(':', '-')}_{task['env']}_{task['seed']}_{task['episodes']}"
+    budget = f"{task['timesteps']}steps" if task.get("timesteps") else task["episodes"]
+    return Path(task["checkpoint_dir"]) / f"{task['algo'].replace(':', '-')}_{task['env']}_{task['seed']}_{budget}"
 
 
 def columns(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
@@ -334,6 +352,13 @@ def resume_or_start(model: Any, folder: Path | None, settings: dict[str, str], d
     return model, None
 
 
+def run_key(task: dict[str, Any]) -> dict[str, Any]:
+    """What identifies a run's cell in its record: row, env, seed and budget (``timesteps_requested`` only for a budget
+    of env steps, so records of episode budgets keep their shape)."""
+    key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+    return {**key, "timesteps_requested": task["timesteps"]} if task.get("timesteps") else key
+
+
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
     """One (algo, env, seed) run of ``task["zoo_algo"]`` with ``task["hyperparams"]`` (needs only the installed package).
 
@@ -344,7 +369,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
     torch.set_num_threads(1)
     log = io.StringIO()
     load_start = os.getloadavg()
-    key = {**{k: task[k] for k in ("algo", "env", "seed")}, "episodes_requested": task["episodes"]}
+    key = run_key(task)
     device = task.get("device", "cpu")  # "cuda": the networks on the GPU; CPU seconds then leave out the GPU's work
     try:
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
@@ -366,12 +391,16 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             eval_env = gym.make(facts.gym_id, **task.get("eval_kwargs", {})) if task["eval_episodes"] > 0 else None
             if eval_env is not None:
                 eval_env.reset(seed=10_000 + task["seed"])
-            performance = EpisodePerformanceCallback(max_episodes=task["episodes"], lower_is_better=facts.lower_is_better)
+            step_budget = task.get("timesteps")
+            max_episodes = None if step_budget else task["episodes"]
+            performance = EpisodePerformanceCallback(max_episodes=max_episodes, lower_is_better=facts.lower_is_better)
             progress = os.environ.get("BENCHMARK_PROGRESS_DIR")
             progress_path = Path(progress) / f"{task['algo']}_{task['env']}_{task['seed']}.json" if progress else None
             if progress_path is not None:
                 progress_path.parent.mkdir(parents=True, exist_ok=True)
-            clock = RunClock(eval_env, task["eval_every"], task["eval_episodes"], task["episodes"], progress_path)
+            clock = RunClock(
+                eval_env, task["eval_every"], task["eval_episodes"], task["episodes"], progress_path, bool(step_budget)
+            )
             steps = GradientSteps()
             callbacks = [performance, clock, steps]
             diagnose = bool(task.get("diagnostics_every")) and hasattr(model, "n_fitted_iterations")  # DENFAC's buffer
@@ -410,8 +439,11 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             max_steps = gym.spec(facts.gym_id).max_episode_steps or 10_000
             # The step budget only guards against a run that never ends an episode; the episode budget stops training.
             # A resumed run's learn() counts on from its saved steps to the same total.
-            total = task["episodes"] * max_steps + 1
+            total = step_budget or task["episodes"] * max_steps + 1
             model.learn(total - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=saved is None)
+            last = clock.evaluations[-1]["timesteps"] if clock.evaluations else -1
+            if step_budget and eval_env is not None and last < model.num_timesteps:
+                clock.evaluate()  # the policy at the budget (learn stops there, inside an episode, after its update)
             wall_time = time.perf_counter() - start + earlier["wall_time"]
             cpu_time = time.process_time() - cpu_start - excluded() + earlier["cpu_time"]
             model.get_env().close()
@@ -419,7 +451,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
                 eval_env.close()
     except Exception:
         return {**key, "status": "failed", "error": traceback.format_exc(), "log": log.getvalue(), "task": task}
-    episodes = performance.records[: task["episodes"]]
+    episodes = performance.records[: task["episodes"] or None]
     for record, cpu in zip(episodes, clock.cpu_times, strict=False):
         record["cpu_time"] = cpu
     return {

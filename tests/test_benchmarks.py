@@ -341,7 +341,7 @@ def test_store_keeps_first_record_and_skips_a_corrupt_tail(tmp_path):
     store.append_record(tmp_path, {**record, "x": 2})  # the same cell again: the first one wins
     store.append_record(tmp_path, {**record, "seed": 1, "status": "failed", "error": "boom"})
     assert [r["x"] for r in store.read_runs(tmp_path)] == [1]
-    assert store.finished_cells(tmp_path) == {("a", "e", 0, 2)}
+    assert store.finished_cells(tmp_path) == {("a", "e", 0, 2, None)}
     size = store.runs_path(tmp_path).stat().st_size
     with store.runs_path(tmp_path).open("ab") as f:
         f.write(b"not gzip at all")
@@ -383,7 +383,7 @@ def test_ray_missing_gives_clear_error(monkeypatch, tmp_path):
 def test_ray_sweep(tmp_path):
     pytest.importorskip("ray")
     status = runner.sweep(["td3"], ["cartpole"], [0], 2, results_dir=tmp_path, ray_address="local", verbose=0)
-    assert len(status["done"]) == 1 and store.finished_cells(tmp_path) == {("td3", "cartpole", 0, 2)}
+    assert len(status["done"]) == 1 and store.finished_cells(tmp_path) == {("td3", "cartpole", 0, 2, None)}
 
 
 def test_cost_extrapolation_recovers_the_cost_models():

@@ -1,0 +1,263 @@
+"""The report of the field's data-efficiency benchmark (suite ``mujoco100k``): Gymnasium MuJoCo at 100k env steps.
+
+Reads the study's runs file (``results/mujoco100k/runs.jsonl.gz``) and writes next to it ``mujoco100k.md`` and
+``mujoco100k.png``. Per (row, env), over seeds:
+
+- **final**: the mean return of the evaluation at the budget (10 deterministic episodes), the field's figure;
+- **best**: the best evaluation of the run, and **final / best** (does a run hold what it finds?);
+- **mean of evaluations**: the area under the evaluation curve per evaluation (the evaluations every 10k steps and the
+  final one, averaged: how early the return came, not only where it ended);
+- **CPU s**: training CPU seconds per run (evaluations left out), one torch thread.
+
+The published figures (``configs/frontier_100k.csv``: the authors' per-seed results on the v4 envs, read once, with
+their source) are the reference: in the table, the last one logged at or before 100k steps; in the figure, their curves.
+
+    python -m benchmarks.mujoco100k [--results benchmarks/results/mujoco100k]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks import store
+from benchmarks.suites import ALGOS, MUJOCO100K_ENVS
+
+_HERE = Path(__file__).resolve().parent
+FRONTIER_CSV = _HERE / "configs" / "frontier_100k.csv"
+#: The published methods drawn in the figure and listed in the table, in this order.
+FRONTIER_METHODS = ("SAC (UTD 1)", "REDQ (UTD 20)", "DroQ (UTD 20)", "CrossQ (UTD 1)", "SimbaV2 (UTD 2)", "MR.Q")
+
+
+def frontier() -> pd.DataFrame:
+    """The published curves: method, env (v4), env_step, mean, std, n_seeds, source."""
+    return pd.read_csv(FRONTIER_CSV, comment="#")
+
+
+def frontier_at_budget(budget: int = 100_000) -> pd.DataFrame:
+    """Per (method, env): the last published evaluation at or before ``budget`` steps."""
+    curves = frontier()
+    curves = curves[curves["env_step"] <= budget].sort_values("env_step")
+    return curves.groupby(["method", "env"], as_index=False).tail(1).reset_index(drop=True)
+
+
+def _v5(env_v4: str) -> str:
+    return env_v4.replace("-v4", "-v5")
+
+
+def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(evaluations, runs) of the study's finished runs with a budget of env steps.
+
+    evaluations: algo, env, seed, timesteps, score (mean of the evaluation's episodes); runs: one row per run with
+    final, best, final_over_best, mean_eval, cpu_time, episodes, gradient_steps, timesteps."""
+    evals, runs = [], []
+    for record in store.read_runs(results_dir):
+        if record.get("status") != "done" or not record.get("timesteps_requested") or not record.get("evaluations"):
+            continue
+        key = {k: record[k] for k in ("algo", "env", "seed")}
+        scores = [(e["timesteps"], float(np.mean(e["scores"]))) for e in record["evaluations"]]
+        evals += [{**key, "timesteps": t, "score": s} for t, s in scores]
+        values = np.array([s for _, s in scores])
+        final, best = values[-1], values.max()
+        runs.append(
+            {
+                **key,
+                "final": final,
+                "best": best,
+                "final_over_best": final / best if best > 0 else float("nan"),
+                "mean_eval": values.mean(),
+                "cpu_time": record["cpu_time"],
+                "episodes": record["n_episodes"],
+                "gradient_steps": record.get("gradient_steps"),
+                "timesteps": record["timesteps"],
+                "machine": (record.get("machine") or {}).get("cpu", ""),
+            }
+        )
+    return pd.DataFrame(evals), pd.DataFrame(runs)
+
+
+def _envs(frame: pd.DataFrame) -> list[str]:
+    """The envs of ``frame``: the suite's in its order, then any other."""
+    present = set(frame["env"])
+    return [e for e in MUJOCO100K_ENVS if e in present] + sorted(present - set(MUJOCO100K_ENVS))
+
+
+def _label(algo: str) -> str:
+    return ALGOS[algo].label if algo in ALGOS else algo
+
+
+def _median(values: pd.Series) -> float:
+    """The median of the values that are not NaN (final / best is NaN where the best return is not positive)."""
+    values = values.dropna()
+    return float(values.median()) if len(values) else float("nan")
+
+
+def _per_seed(values: pd.Series, digits: int = 0) -> str:
+    return ", ".join(f"{v:.{digits}f}" for v in values)
+
+
+def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
+    """One line per row on ``env``: medians over seeds, with the per-seed finals."""
+    lines = []
+    for algo, r in runs[runs["env"] == env].groupby("algo", sort=False):
+        r = r.sort_values("seed")
+        lines.append(
+            {
+                "row": _label(algo),
+                "seeds": len(r),
+                "final, median (per seed)": f"{r['final'].median():.0f} ({_per_seed(r['final'])})",
+                "best, median": f"{r['best'].median():.0f}",
+                "final / best, median": f"{_median(r['final_over_best']):.2f}",
+                "mean of evaluations, median": f"{r['mean_eval'].median():.0f}",
+                "CPU s per run, median": f"{r['cpu_time'].median():.0f}",
+                "episodes, median": f"{r['episodes'].median():.0f}",
+            }
+        )
+    return pd.DataFrame(lines)
+
+
+def reference_table(envs: Sequence[str]) -> pd.DataFrame:
+    """The published figures at 100k steps on ``envs`` (v5 names; the published runs are on v4)."""
+    ref = frontier_at_budget()
+    lines = []
+    for method in FRONTIER_METHODS:
+        line = {"method": method}
+        for env in envs:
+            hit = ref[(ref["method"] == method) & (ref["env"].map(_v5) == env)]
+            line[env] = (
+                f"{hit['mean'].iloc[0]:.0f} ± {hit['std'].iloc[0]:.0f} ({hit['n_seeds'].iloc[0]} seeds, at "
+                f"{hit['env_step'].iloc[0] / 1000:.0f}k)"
+                if not hit.empty
+                else "-"
+            )
+        lines.append(line)
+    return pd.DataFrame(lines)
+
+
+def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str = "sac_zoo") -> list[str]:
+    """Issue #44's targets for ``algo``, each met or missed with its figures (medians over seeds)."""
+    mine = runs[runs["algo"] == algo]
+    if mine.empty:
+        return [f"- no finished runs of `{algo}` yet"]
+    ref = frontier_at_budget()
+    ref = ref.assign(env=ref["env"].map(_v5))
+    out, beats_strong = [], 0
+    envs = _envs(mine)
+    for env in envs:
+        final = mine.loc[mine["env"] == env, "final"].median()
+
+        def published(method: str, env: str = env) -> float:
+            hit = ref[(ref["method"] == method) & (ref["env"] == env)]
+            return float(hit["mean"].iloc[0]) if not hit.empty else float("nan")
+
+        sac, strong = published("SAC (UTD 1)"), max(published("REDQ (UTD 20)"), published("DroQ (UTD 20)"))
+        strong_min = min(published("REDQ (UTD 20)"), published("DroQ (UTD 20)"))
+        beats_strong += final >= strong_min
+        verdict = "met" if final >= sac else f"missed by {sac - final:.0f}"
+        out.append(f"- {env}: final {final:.0f}, the published SAC's {sac:.0f}: {verdict} (REDQ/DroQ up to {strong:.0f})")
+    out.append(f"- at least REDQ's or DroQ's final on {beats_strong} of {len(envs)} envs (target: 2)")
+    ratio = mine.groupby("env")["final_over_best"].agg(_median)
+    out.append(
+        "- holds what it finds (final / best >= 0.8, median over seeds): "
+        + ", ".join(f"{env} {ratio[env]:.2f}" for env in envs)
+    )
+    theirs = runs[runs["algo"] == peer].groupby("env")["cpu_time"].median()
+    cpu = mine.groupby("env")["cpu_time"].median()
+    shares = [f"{env} 1/{theirs[env] / cpu[env]:.1f}" for env in envs if env in theirs]
+    out.append("- CPU per run against SB3 SAC's here (target: at most 1/5): " + (", ".join(shares) or "no SAC runs yet"))
+    return out
+
+
+def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
+    """Per env: each row's evaluation curve (median over seeds, interquartile band; CPU per run in the legend) and the
+    published curves (dashed, labelled with their env version and seed count)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    envs = _envs(evals)
+    curves = frontier()
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.6), squeeze=False)
+    for ax, env in zip(axes[0], envs, strict=True):
+        for method in FRONTIER_METHODS:
+            c = curves[(curves["method"] == method) & (curves["env"].map(_v5) == env)].sort_values("env_step")
+            if not c.empty:
+                label = f"{method}, published (v4, {c['n_seeds'].max()} seeds)"
+                ax.plot(c["env_step"] / 1000, c["mean"], ls="--", lw=1, alpha=0.7, label=label)
+        for algo, e in evals[evals["env"] == env].groupby("algo", sort=False):
+            grid = np.arange(10_000, 100_001, 10_000)
+            # each seed's evaluations (at the first episode end past each 10k steps) interpolated onto the 10k grid
+            per_seed = [np.interp(grid, s["timesteps"], s["score"]) for _, s in e.groupby("seed") if len(s) > 1]
+            if not per_seed:
+                continue
+            values = np.array(per_seed)
+            cpu = runs.loc[(runs["algo"] == algo) & (runs["env"] == env), "cpu_time"].median()
+            label = f"{_label(algo)} ({len(values)} seeds, {cpu:.0f} CPU s)"
+            (line,) = ax.plot(grid / 1000, np.median(values, axis=0), lw=2, label=label)
+            lo, hi = np.percentile(values, [25, 75], axis=0)
+            ax.fill_between(grid / 1000, lo, hi, color=line.get_color(), alpha=0.2)
+        ax.set_title(env)
+        ax.set_xlabel("env steps (thousands)")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("evaluation return (10 episodes)")
+    handles, labels = [], []
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.05 + 0.035 * ((len(labels) + 2) // 3), 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report(results_dir: str | Path) -> str:
+    """Write ``mujoco100k.md`` (and ``.png``) in ``results_dir``; return the markdown."""
+    out = Path(results_dir)
+    evals, runs = load(out)
+    if runs.empty:
+        raise FileNotFoundError(f"no finished runs with a budget of env steps in {store.runs_path(out)}")
+    envs = _envs(runs)
+    parts = [
+        "# Benchmark suite `mujoco100k`: Gymnasium MuJoCo at 100k env steps\n",
+        "Generated by `python -m benchmarks.mujoco100k` from `runs.jsonl.gz`. Medians over seeds; final = the mean "
+        "return of 10 deterministic episodes at the budget; one torch thread per run. Methods: "
+        "[docs/benchmark.md](../../../docs/benchmark.md).\n",
+        f"Machines: {', '.join(sorted(set(runs['machine']) - {''})) or 'unknown'}.\n",
+    ]
+    for env in envs:
+        parts += [f"## {env}\n", env_table(runs, env).to_markdown(index=False), ""]
+    parts += [
+        "## Published at 100k steps (reference)\n",
+        "The authors' runs on the v4 envs (the same tasks with minor model fixes), read from their per-seed results "
+        "(`benchmarks/configs/frontier_100k.csv`, with the file and commit of each): mean ± standard deviation across "
+        "seeds of the last evaluation logged at or before 100k steps.\n",
+        reference_table(MUJOCO100K_ENVS).to_markdown(index=False),
+        "",
+        "## Targets of the data-efficient preset (issue #44)\n",
+        *targets(runs),
+        "",
+        "![evaluation curves](mujoco100k.png)",
+        "",
+    ]
+    text = "\n".join(parts)
+    (out / "mujoco100k.md").write_text(text)
+    plot(evals, runs, out / "mujoco100k.png")
+    return text
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--results", default=str(_HERE / "results" / "mujoco100k"), help="the study's folder")
+    args = parser.parse_args(argv)
+    print(report(args.results))
+
+
+if __name__ == "__main__":
+    main()
