@@ -43,6 +43,29 @@ def test_the_dial_without_a_cap(ratio, n_new, expected):
     assert fitted_iterations(None, 5, ratio, n_new) == expected
 
 
+@pytest.mark.parametrize(
+    ("bounds", "n_new", "expected"), [((10, None), 20, 10), ((10, None), 1000, 200), ((2, 3), 1000, 3), ((2, 3), 1, 2)]
+)
+def test_the_dial_within_a_range(bounds, n_new, expected):
+    """(K_min, K_max): at least K_min iterations after any episode, rho critic steps per env step beyond, at most K_max."""
+    assert fitted_iterations(bounds, 5, 1.0, n_new) == expected
+
+
+@pytest.mark.parametrize(
+    ("value", "ratio", "cause"),
+    [
+        ((10, None), None, "bounds K_e"),
+        ((0, None), 1.0, "K_min"),
+        ((5, 2), 1.0, "K_max"),
+        ((1, 2, 3), 1.0, r"or \(K_min, K_max\)"),
+        (0, 1.0, r"n_fitted_iterations \(K\)"),
+    ],
+)
+def test_bad_ranges_name_the_cause(target_action_env, value, ratio, cause):
+    with pytest.raises(ValueError, match=cause):
+        DENFAC("MlpPolicy", target_action_env(), n_fitted_iterations=value, update_to_data_ratio=ratio)
+
+
 def test_no_cap_needs_the_ratio(target_action_env):
     with pytest.raises(ValueError, match="n_fitted_iterations=None.*update_to_data_ratio"):
         DENFAC("MlpPolicy", target_action_env(), n_fitted_iterations=None)

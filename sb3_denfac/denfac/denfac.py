@@ -38,7 +38,13 @@ from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
-from sb3_denfac.denfac.options import bootstrap_range, check_options, fitted_iterations
+from sb3_denfac.denfac.options import (
+    FittedIterations,
+    bootstrap_range,
+    check_fitted_iterations,
+    check_options,
+    fitted_iterations,
+)
 from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, parse_ent_coef
 from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
 
@@ -80,7 +86,7 @@ class DENFAC(
         None = full batch (paper)
     :param gamma: discount factor gamma
     :param n_fitted_iterations: K, fitted iterations per update (paper: 10); with ``update_to_data_ratio``, the cap on
-        K_e (None: no cap, the update then grows with the steps collected)
+        K_e, or its range ``(K_min, K_max)`` (K_max None: no cap; None alone: ``(1, None)``)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)
     :param actor_steps: G, Adam steps of the actor per fitted iteration (paper: 25)
     :param reset_critic: re-initialise the critic (and its Adam state) at every fitted iteration (paper: Acrobot yes)
@@ -107,8 +113,9 @@ class DENFAC(
     :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
     :param update_to_data_ratio: rho, the compute dial (:mod:`~.options`): the update after an episode of n steps runs
-        K_e = min(K, ceil(rho n / critic_steps)) fitted iterations, about rho critic steps per env step (K = None: no
-        cap); None (default, the paper): K at every update, whatever the episode's length
+        K_e = min(K, ceil(rho n / critic_steps)) fitted iterations, about rho critic steps per env step, or within the
+        range ``n_fitted_iterations=(K_min, K_max)``; None (default, the paper): K at every update, whatever the
+        episode's length
     :param target_policy_noise: std of the Gaussian noise added to pi_{k-1}(s') in the targets of eq. (4) (TD3's target
         policy smoothing, in the scaled action space; default 0.2, TD3's; paper: 0, the deterministic next action)
     :param target_noise_clip: the noise of ``target_policy_noise`` is clipped to +-this (TD3: 0.5)
@@ -155,7 +162,7 @@ class DENFAC(
         learning_starts: int = 0,
         batch_size: int | None = 256,
         gamma: float = 0.99,
-        n_fitted_iterations: int | None = 10,
+        n_fitted_iterations: FittedIterations = 10,
         critic_steps: int = 50,
         actor_steps: int = 25,
         reset_critic: bool = False,
@@ -191,12 +198,7 @@ class DENFAC(
         torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
-        check_number("n_fitted_iterations (K)", n_fitted_iterations, minimum=1, integer=True, none_ok=True)
-        if n_fitted_iterations is None and update_to_data_ratio is None:
-            raise ValueError(
-                "n_fitted_iterations=None (no cap on the fitted iterations) needs update_to_data_ratio, which then sets "
-                "K_e from the steps collected; without it every update runs K iterations: give K an int"
-            )
+        n_fitted_iterations = check_fitted_iterations(n_fitted_iterations, update_to_data_ratio)
         check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
         check_number("critic_steps", critic_steps, minimum=1, integer=True)
         check_choice("weighting", weighting, WEIGHTINGS)
@@ -357,9 +359,10 @@ class DENFAC(
     def _update(self, n_iterations: int | None = None) -> None:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""
         start = time.perf_counter()
-        n_iterations = self.n_fitted_iterations if n_iterations is None else n_iterations
         if n_iterations is None:
-            raise ValueError("n_fitted_iterations is None (rho alone sizes the update): pass _update the iterations")
+            if not isinstance(self.n_fitted_iterations, int):
+                raise ValueError("n_fitted_iterations is a range for update_to_data_ratio: pass _update the iterations")
+            n_iterations = self.n_fitted_iterations
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)

@@ -36,9 +36,11 @@ a short episode. With rho, the update after an episode (rollout) of n steps (SB3
 
     K_e = min(K, ceil(rho n / critic_steps))   fitted iterations,
 
-i.e. about rho critic steps per collected step, never more than K iterations; with K = None (``n_fitted_iterations``)
-there is no cap and rho alone sets the update's size: this is DENFAC's compute dial, from a fraction of a critic step
-per env step to the frontier's 1-20 (REDQ, DroQ: 20). Each fitted iteration keeps Algorithm 1's shape (targets from
+i.e. about rho critic steps per collected step, never more than K iterations. ``n_fitted_iterations`` may also give
+the range of K_e, ``(K_min, K_max)``: K_e = clip(ceil(rho n / critic_steps), K_min, K_max), with K_max None for no cap
+(``None`` alone is ``(1, None)``). This is DENFAC's compute dial: ``(K, None)`` keeps at least Algorithm 1's update
+after every episode, however short, and adds iterations as the episodes grow, about rho critic steps per env step, from
+a fraction of a step to the frontier's 1-20 (REDQ, DroQ: 20). Each fitted iteration keeps Algorithm 1's shape (targets from
 (Q_{k-1}, pi_{k-1}), ``critic_steps`` critic steps, G actor steps), so a larger rho means more iterations, each one
 refreshing the targets of eq. (4), not longer ones.
 
@@ -89,14 +91,48 @@ def check_options(
     return prioritized, alpha, beta, eps, proximal
 
 
-def fitted_iterations(n_fitted_iterations: int | None, critic_steps: int, ratio: float | None, n_steps: int) -> int:
-    """K_e of the update after a rollout of ``n_steps`` steps (module docstring); ``ratio`` None: always K;
-    ``n_fitted_iterations`` None: no cap."""
+#: ``n_fitted_iterations``: K (an int), or with ``update_to_data_ratio`` the range (K_min, K_max) of K_e (None: no cap)
+FittedIterations = int | tuple[int, int | None] | None
+
+
+def check_fitted_iterations(value: Any, ratio: float | None) -> FittedIterations:
+    """``n_fitted_iterations`` validated (module docstring): an int K >= 1; with ``update_to_data_ratio``, also None (no
+    cap) or a range (K_min, K_max), K_max None for no cap; else a ValueError that names the cause."""
+    name = "n_fitted_iterations (K)"
+    if value is None:
+        if ratio is None:
+            raise ValueError(
+                "n_fitted_iterations=None (no cap on the fitted iterations) needs update_to_data_ratio, which then sets "
+                "K_e from the steps collected; without it every update runs K iterations: give K an int"
+            )
+        return None
+    if not isinstance(value, tuple | list):
+        return check_number(name, value, minimum=1, integer=True)
+    if len(value) != 2:
+        raise ValueError(f"{name} must be an int K, or with update_to_data_ratio None or (K_min, K_max), got {value!r}")
     if ratio is None:
-        assert n_fitted_iterations is not None  # refused by DENFAC's constructor
+        raise ValueError(
+            f"n_fitted_iterations={tuple(value)!r} bounds K_e, the iterations update_to_data_ratio asks for; without it "
+            "every update runs K iterations: give K an int"
+        )
+    low = check_number("n_fitted_iterations[0] (K_min)", value[0], minimum=1, integer=True)
+    high = check_number("n_fitted_iterations[1] (K_max)", value[1], minimum=low, integer=True, none_ok=True)
+    return low, high
+
+
+def fitted_iterations(n_fitted_iterations: FittedIterations, critic_steps: int, ratio: float | None, n_steps: int) -> int:
+    """K_e of the update after a rollout of ``n_steps`` steps (module docstring); ``ratio`` None: always K."""
+    if ratio is None:
+        assert isinstance(n_fitted_iterations, int)  # checked by check_fitted_iterations
         return n_fitted_iterations
     wanted = math.ceil(round(ratio * n_steps / critic_steps, 9))  # 0.07 * 100 / 7 is 1.0000000000000002 in floats
-    return max(1, wanted if n_fitted_iterations is None else min(n_fitted_iterations, wanted))
+    if n_fitted_iterations is None:
+        low, high = 1, None
+    elif isinstance(n_fitted_iterations, int):
+        low, high = 1, n_fitted_iterations
+    else:
+        low, high = n_fitted_iterations
+    return max(low, wanted if high is None else min(high, wanted))
 
 
 class PrioritisedSampler:
