@@ -172,6 +172,58 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
     return out
 
 
+def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
+    """Per run: the env steps of its first evaluation at or above the published SAC's return at ``budget`` steps on
+    the env (the level), NaN if none reaches it."""
+    ref = frontier_at_budget(budget)
+    level = {
+        _v5(e): m
+        for e, m in zip(
+            ref.loc[ref["method"] == "SAC (UTD 1)", "env"], ref.loc[ref["method"] == "SAC (UTD 1)", "mean"], strict=True
+        )
+    }
+    rows = []
+    for (algo, env, seed), e in evals.groupby(["algo", "env", "seed"], sort=False):
+        hit = e.loc[e["score"] >= level.get(env, np.inf), "timesteps"]
+        rows.append(
+            {"algo": algo, "env": env, "seed": seed, "level": level.get(env), "steps": hit.min() if len(hit) else np.nan}
+        )
+    return pd.DataFrame(rows)
+
+
+def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
+    """Per env: env steps to the published SAC's 100k-step return (median over seeds; runs that never reach it count
+    as beyond the budget) against CPU seconds per run (median), one point per row."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    reached = steps_to_level(evals)
+    envs = [e for e in _envs(evals) if reached.loc[reached["env"] == e, "level"].notna().any()]
+    if not envs:
+        return
+    fig, axes = plt.subplots(1, len(envs), figsize=(3.6 * len(envs), 3.4), squeeze=False)
+    for ax, env in zip(axes[0], envs, strict=True):
+        level = reached.loc[reached["env"] == env, "level"].iloc[0]
+        for algo, r in reached[reached["env"] == env].groupby("algo", sort=False):
+            steps = r["steps"].fillna(np.inf).median()
+            cpu = runs.loc[(runs["algo"] == algo) & (runs["env"] == env), "cpu_time"].median()
+            shown = min(steps, 110_000) / 1000
+            ax.scatter([cpu], [shown], marker="o" if np.isfinite(steps) else "^", s=40, label=_label(algo))
+        ax.axhline(100, color="grey", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_title(f"{env}: to {level:.0f}")
+        ax.set_xlabel("CPU s per run (median)")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("env steps to the level (thousands; ^: not reached)")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
     """Per env: each row's evaluation curve (median over seeds, interquartile band; CPU per run in the legend) and the
     published curves (dashed, labelled with their env version and seed count)."""
@@ -245,10 +297,16 @@ def report(results_dir: str | Path) -> str:
         "",
         "![evaluation curves](mujoco100k.png)",
         "",
+        "Env steps to the published SAC's 100k-step return against CPU per run (a row that never reaches it is drawn "
+        "as a triangle above the budget):",
+        "",
+        "![steps to the level against CPU](mujoco100k_cost.png)",
+        "",
     ]
     text = "\n".join(parts)
     (out / "mujoco100k.md").write_text(text)
     plot(evals, runs, out / "mujoco100k.png")
+    plot_cost(evals, runs, out / "mujoco100k_cost.png")
     return text
 
 
