@@ -1,5 +1,6 @@
-"""DENFAC's data-efficient end: the critics' layer norm (``policy_kwargs=dict(layer_norm=True)``) and
-:data:`sb3_denfac.denfac.presets.DATA_EFFICIENT` (the compute dial without a cap, and layer-normalised critics)."""
+"""DENFAC's data-efficient end: :data:`sb3_denfac.denfac.presets.DATA_EFFICIENT` (the compute dial at 4 critic steps
+per env step, at least K iterations per episode, bootstrap bounds), and the critics' layer norm option
+(``policy_kwargs=dict(layer_norm=True)``, measured and left out of the preset: docs/denfac.md)."""
 
 from __future__ import annotations
 
@@ -56,7 +57,8 @@ def test_critic_reset_reinitialises_the_layer_norms(target_action_env):
 
 
 def test_save_load_keeps_the_layer_norm(tmp_path, target_action_env):
-    model = DENFAC("MlpPolicy", target_action_env(), **data_efficient(**SMALL)).learn(20)
+    kwargs = data_efficient(policy_kwargs=dict(layer_norm=True), **SMALL)
+    model = DENFAC("MlpPolicy", target_action_env(), **kwargs).learn(20)
     model.save(tmp_path / "model.zip")
     loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert loaded.policy.layer_norm and len(_layer_norms(loaded.critic)) == 4
@@ -64,20 +66,34 @@ def test_save_load_keeps_the_layer_norm(tmp_path, target_action_env):
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
 
 
-def test_the_preset_is_the_dial_without_a_cap_and_layer_norm(target_action_env):
+def test_the_preset_is_the_dial_with_a_floor_and_bounds(target_action_env):
     model = DENFAC("MlpPolicy", target_action_env(), **DATA_EFFICIENT)
-    assert model.n_fitted_iterations is None and model.update_to_data_ratio == 1.0 and model.policy.layer_norm
-    assert data_efficient(update_to_data_ratio=4)["update_to_data_ratio"] == 4
-    assert DATA_EFFICIENT["update_to_data_ratio"] == 1.0  # with_overrides copies
+    assert tuple(model.n_fitted_iterations) == (10, None) and model.update_to_data_ratio == 4.0
+    assert model.bootstrap_bounds and not model.policy.layer_norm
+    assert data_efficient(update_to_data_ratio=2)["update_to_data_ratio"] == 2
+    assert DATA_EFFICIENT["update_to_data_ratio"] == 4.0  # with_overrides copies
+
+
+def test_the_preset_updates_at_least_as_much_as_the_default(target_action_env):
+    """Critic steps per episode of 10 steps: the default's K = 10 iterations (the floor), not rho n = 40 steps; and on
+    1000-step episodes 80 iterations of 50 steps (4 per env step) where the default stays at 10."""
+    from sb3_denfac.denfac.options import fitted_iterations
+
+    preset, default = DATA_EFFICIENT["n_fitted_iterations"], 10
+    assert fitted_iterations(preset, 50, 4.0, 10) == fitted_iterations(default, 50, None, 10) == 10
+    assert fitted_iterations(preset, 50, 4.0, 1000) == 80
+    model = DENFAC("MlpPolicy", target_action_env(), **data_efficient(critic_steps=5, actor_steps=1, seed=0))
+    model.learn(20)
+    assert {int(state["step"]) for state in model.critic.optimizer.state.values()} == {2 * 10 * 5}
 
 
 def test_the_zoo_expands_the_preset():
     entry = select_entry({"Pendulum-v1": {"policy": "MlpPolicy", "preset": "data_efficient"}}, "Pendulum-v1", "f.yml")
-    assert entry["n_fitted_iterations"] is None and entry["policy_kwargs"] == {"layer_norm": True}
+    assert tuple(entry["n_fitted_iterations"]) == (10, None) and entry["bootstrap_bounds"] is True
 
 
 def test_the_preset_learns_the_target_action(target_action_env):
-    """10-step episodes, one critic step per env step (2 iterations of 5 steps) on layer-normalised critics: the actor
+    """10-step episodes with the preset's floor of K = 10 iterations (of 5 critic steps) and bounded targets: the actor
     moves to the rewarded action."""
     env = target_action_env()
     model = DENFAC("MlpPolicy", env, gamma=0.9, **data_efficient(**SMALL))

@@ -39,19 +39,21 @@ PAPER: dict[str, Any] = {
 }
 
 
-#: The compute dial's data-efficient end (docs/denfac.md, "The compute dial"): about ``update_to_data_ratio`` critic
-#: steps per collected env step, without a cap on the fitted iterations (:mod:`~.options`), and layer-normalised critics
-#: (:func:`~sb3_denfac.common.networks.create_bn_mlp`'s ``layer_norm``) that keep eq. (4)'s regression well scaled over
-#: the many more fitted iterations. Everything else is the default's.
+#: The compute dial's data-efficient end (docs/denfac.md, "The compute dial"): at least Algorithm 1's K = 10 fitted
+#: iterations after every episode, and about 4 critic steps per collected env step beyond (``update_to_data_ratio``
+#: with the range ``(10, None)``, :mod:`~.options`), with eq. (4)'s bootstrap value kept inside the discounted returns
+#: the rewards in D allow (``bootstrap_bounds``), which stops the critic feeding on its own overestimates over the
+#: many more fitted iterations. Everything else is the default's.
 DATA_EFFICIENT: dict[str, Any] = {
-    "update_to_data_ratio": 1.0,
-    "n_fitted_iterations": None,
-    "policy_kwargs": {"layer_norm": True},
+    "update_to_data_ratio": 4.0,
+    "n_fitted_iterations": (10, None),
+    "bootstrap_bounds": True,
 }
 
 
 def data_efficient(**overrides: Any) -> dict[str, Any]:
-    """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=4``."""
+    """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=2`` (half the
+    compute)."""
     return with_overrides(DATA_EFFICIENT, overrides)
 
 
