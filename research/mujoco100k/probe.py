@@ -96,7 +96,7 @@ def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, 
     th.set_num_threads(1)
     row = dict(row)
     algo = row.pop("algo", "denfac")
-    env = gym.make(env_id)
+    env = Monitor(gym.make(env_id))  # the training episodes' returns, for episodes to a level
     eval_env = Monitor(gym.make(env_id))
     eval_env.reset(seed=10_000 + seed)
     if algo == "denfac":
@@ -125,6 +125,7 @@ def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, 
         "cpu_time": cpu - callback.eval_cpu,
         "wall_time": wall,
         "evaluations": callback.evaluations,
+        "episode_returns": [round(float(r), 2) for r in env.get_episode_rewards()],
         "settings": {k: repr(v) for k, v in row.items()},
         "commit": git_commit(),
         "machine": platform.processor() or platform.machine(),
