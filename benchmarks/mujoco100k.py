@@ -74,10 +74,18 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "episodes": record["n_episodes"],
                 "gradient_steps": record.get("gradient_steps"),
                 "timesteps": record["timesteps"],
-                "machine": (record.get("machine") or {}).get("cpu", ""),
+                "machine": "{cpu_model} ({nproc} cores)".format_map(
+                    {"cpu_model": "?", "nproc": "?", **(record.get("machine") or {})}
+                ),
+                "commit": ((record.get("git") or {}).get("commit") or "")[:7],
+                "load": max((record.get("load_average") or {}).get("end") or [float("nan")]),
             }
         )
-    return pd.DataFrame(evals), pd.DataFrame(runs)
+    evals, runs = pd.DataFrame(evals), pd.DataFrame(runs)
+    if not runs.empty:
+        reached = steps_to_level(evals).set_index(["algo", "env", "seed"])["steps"]
+        runs["to_sac_level"] = [reached.get(key, np.nan) for key in zip(runs["algo"], runs["env"], runs["seed"], strict=True)]
+    return evals, runs
 
 
 def _envs(frame: pd.DataFrame) -> list[str]:
@@ -94,6 +102,10 @@ def _median(values: pd.Series) -> float:
     """The median of the values that are not NaN (final / best is NaN where the best return is not positive)."""
     values = values.dropna()
     return float(values.median()) if len(values) else float("nan")
+
+
+def _per_seed_steps(values: pd.Series) -> str:
+    return ", ".join("-" if np.isnan(v) else f"{v / 1000:.0f}k" for v in values)
 
 
 def _per_seed(values: pd.Series, digits: int = 0) -> str:
@@ -115,6 +127,7 @@ def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
                 "mean of evaluations, median": f"{r['mean_eval'].median():.0f}",
                 "CPU s per run, median": f"{r['cpu_time'].median():.0f}",
                 "episodes, median": f"{r['episodes'].median():.0f}",
+                "env steps to the published SAC's 100k return, per seed": _per_seed_steps(r["to_sac_level"]),
             }
         )
     return pd.DataFrame(lines)
@@ -192,36 +205,59 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
 
 
 def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
-    """Per env: env steps to the published SAC's 100k-step return (median over seeds; runs that never reach it count
-    as beyond the budget) against CPU seconds per run (median), one point per row."""
+    """Per env: the final evaluation at the budget (median over seeds, the seeds as small dots) against CPU seconds per
+    run (median), one point per row; the published SAC's and REDQ's 100k-step returns as horizontal lines."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    reached = steps_to_level(evals)
-    envs = [e for e in _envs(evals) if reached.loc[reached["env"] == e, "level"].notna().any()]
-    if not envs:
-        return
-    fig, axes = plt.subplots(1, len(envs), figsize=(3.6 * len(envs), 3.4), squeeze=False)
+    envs = _envs(runs)
+    ref = frontier_at_budget().assign(env=lambda f: f["env"].map(_v5))
+    others = iter(OTHER_COLOURS * 4)
+    colours = {algo: ROW_COLOURS.get(algo) or next(others) for algo in dict.fromkeys(runs["algo"])}
+    fig, axes = plt.subplots(1, len(envs), figsize=(3.6 * len(envs), 3.3), squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
-        level = reached.loc[reached["env"] == env, "level"].iloc[0]
-        for algo, r in reached[reached["env"] == env].groupby("algo", sort=False):
-            steps = r["steps"].fillna(np.inf).median()
-            cpu = runs.loc[(runs["algo"] == algo) & (runs["env"] == env), "cpu_time"].median()
-            shown = min(steps, 110_000) / 1000
-            ax.scatter([cpu], [shown], marker="o" if np.isfinite(steps) else "^", s=40, label=_label(algo))
-        ax.axhline(100, color="grey", lw=0.8, ls=":")
+        for method, colour in (("SAC (UTD 1)", "tab:cyan"), ("REDQ (UTD 20)", "tab:olive")):
+            hit = ref[(ref["method"] == method) & (ref["env"] == env)]
+            if not hit.empty:
+                ax.axhline(hit["mean"].iloc[0], ls="--", lw=1, color=colour, label=f"{method}, published at 100k (v4)")
+        for algo, r in runs[runs["env"] == env].groupby("algo", sort=False):
+            cpu = r["cpu_time"].median()
+            ax.scatter(r["cpu_time"], r["final"], s=10, color=colours[algo], alpha=0.5)
+            ax.scatter([cpu], [r["final"].median()], s=60, color=colours[algo], label=_label(algo), zorder=3)
         ax.set_xscale("log")
-        ax.set_title(f"{env}: to {level:.0f}")
-        ax.set_xlabel("CPU s per run (median)")
+        ax.set_title(env)
+        ax.set_xlabel("CPU s per run")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("env steps to the level (thousands; ^: not reached)")
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    axes[0][0].set_ylabel("final evaluation at 100k steps")
+    handles, names = [], []
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in names:
+                handles.append(h)
+                names.append(lab)
+    fig.legend(handles, names, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+#: Colours: the rows run here bold, the published curves thin and dashed.
+ROW_COLOURS = {"denfac_default": "black", "denfac_data_efficient": "tab:red", "sac_zoo": "tab:blue"}
+OTHER_COLOURS = ("tab:green", "tab:orange", "gold", "teal")
+FRONTIER_COLOURS = ("tab:cyan", "tab:olive", "tab:purple", "tab:brown", "tab:pink", "tab:gray")
+
+
+def _row_labels(runs: pd.DataFrame, envs: list[str]) -> dict[str, str]:
+    """Each row's legend: its label, seeds and median CPU s per run on each env."""
+    labels = {}
+    for algo, r in runs.groupby("algo", sort=False):
+        cpu = " / ".join(
+            f"{r.loc[r['env'] == env, 'cpu_time'].median():.0f}" if (r["env"] == env).any() else "-" for env in envs
+        )
+        labels[algo] = f"{_label(algo)} ({r['seed'].nunique()} seeds; CPU s per run: {cpu})"
+    return labels
 
 
 def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
@@ -234,13 +270,16 @@ def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
 
     envs = _envs(evals)
     curves = frontier()
+    labels = _row_labels(runs, envs)
+    others = iter(OTHER_COLOURS * 4)
+    colours = {algo: ROW_COLOURS.get(algo) or next(others) for algo in labels}
     fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.6), squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
-        for method in FRONTIER_METHODS:
+        for method, colour in zip(FRONTIER_METHODS, FRONTIER_COLOURS, strict=True):
             c = curves[(curves["method"] == method) & (curves["env"].map(_v5) == env)].sort_values("env_step")
             if not c.empty:
                 label = f"{method}, published (v4, {c['n_seeds'].max()} seeds)"
-                ax.plot(c["env_step"] / 1000, c["mean"], ls="--", lw=1, alpha=0.7, label=label)
+                ax.plot(c["env_step"] / 1000, c["mean"], ls="--", lw=1, alpha=0.8, color=colour, label=label)
         for algo, e in evals[evals["env"] == env].groupby("algo", sort=False):
             grid = np.arange(10_000, 100_001, 10_000)
             # each seed's evaluations (at the first episode end past each 10k steps) interpolated onto the 10k grid
@@ -248,23 +287,23 @@ def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
             if not per_seed:
                 continue
             values = np.array(per_seed)
-            cpu = runs.loc[(runs["algo"] == algo) & (runs["env"] == env), "cpu_time"].median()
-            label = f"{_label(algo)} ({len(values)} seeds, {cpu:.0f} CPU s)"
-            (line,) = ax.plot(grid / 1000, np.median(values, axis=0), lw=2, label=label)
+            ax.plot(grid / 1000, np.median(values, axis=0), lw=2.2, color=colours[algo], label=labels[algo])
             lo, hi = np.percentile(values, [25, 75], axis=0)
-            ax.fill_between(grid / 1000, lo, hi, color=line.get_color(), alpha=0.2)
+            ax.fill_between(grid / 1000, lo, hi, color=colours[algo], alpha=0.15)
         ax.set_title(env)
         ax.set_xlabel("env steps (thousands)")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("evaluation return (10 episodes)")
-    handles, labels = [], []
+    handles, names = [], []
     for ax in axes[0]:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if lab not in labels:
+            if lab not in names:
                 handles.append(h)
-                labels.append(lab)
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.05 + 0.035 * ((len(labels) + 2) // 3), 1, 1))
+                names.append(lab)
+    mine = [i for i, n in enumerate(names) if n in labels.values()]
+    order = mine + [i for i in range(len(names)) if i not in mine]
+    fig.legend([handles[i] for i in order], [names[i] for i in order], loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.04 + 0.045 * ((len(names) + 1) // 2), 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -281,7 +320,9 @@ def report(results_dir: str | Path) -> str:
         "Generated by `python -m benchmarks.mujoco100k` from `runs.jsonl.gz`. Medians over seeds; final = the mean "
         "return of 10 deterministic episodes at the budget; one torch thread per run. Methods: "
         "[docs/benchmark.md](../../../docs/benchmark.md).\n",
-        f"Machines: {', '.join(sorted(set(runs['machine']) - {''})) or 'unknown'}.\n",
+        f"Machines: {', '.join(sorted(set(runs['machine'])))}; commits: {', '.join(sorted(set(runs['commit'])))}; load "
+        f"average at the runs' ends {runs['load'].min():.1f}-{runs['load'].max():.1f} (CPU seconds are inflated on a busy "
+        "machine: compare them within a table, as ratios).\n",
     ]
     for env in envs:
         parts += [f"## {env}\n", env_table(runs, env).to_markdown(index=False), ""]
@@ -297,10 +338,9 @@ def report(results_dir: str | Path) -> str:
         "",
         "![evaluation curves](mujoco100k.png)",
         "",
-        "Env steps to the published SAC's 100k-step return against CPU per run (a row that never reaches it is drawn "
-        "as a triangle above the budget):",
+        "The return bought per CPU second: final evaluation against CPU per run (large dots: medians; small: seeds):",
         "",
-        "![steps to the level against CPU](mujoco100k_cost.png)",
+        "![final evaluation against CPU](mujoco100k_cost.png)",
         "",
     ]
     text = "\n".join(parts)
