@@ -145,8 +145,8 @@ def main(argv: list[str] | None = None) -> None:
         added = merge(args.into, args.sources)
     except FileNotFoundError as error:
         parser.error(str(error))
-    for algo, env, seed, episodes in added:
-        print(f"added {algo} {env} seed {seed} ({episodes} episodes)")
+    for algo, env, seed, episodes, timesteps in added:
+        print(f"added {algo} {env} seed {seed} ({f'{timesteps} steps' if timesteps else f'{episodes} episodes'})")
     print(f"{len(added)} runs added to {runs_path(args.into)}")
 
 
