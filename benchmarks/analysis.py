@@ -400,11 +400,12 @@ def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str
         if unknown := sorted(chosen - known):
             raise ValueError(f"unknown suite(s) {unknown}: this study's reports are {sorted(known)}")
     out = Path(results_dir)
-    if any(record.get("timesteps_requested") for record in store.read_runs(out)):  # budgets of env steps
+    records = store.read_runs(out)
+    if any(record.get("timesteps_requested") for record in records):  # budgets of env steps
         from benchmarks import mujoco100k  # (imports nothing of this module)
 
         return mujoco100k.report(out)
-    episodes, runs = load(out)
+    episodes, runs = load_records(records)
     if runs.empty:
         raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")
     runs.to_csv(out / "runs.csv", index=False)

@@ -18,6 +18,7 @@ their source) are the reference: in the table, the last one logged at or before 
 from __future__ import annotations
 
 import argparse
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,9 +34,17 @@ FRONTIER_CSV = _HERE / "configs" / "frontier_100k.csv"
 FRONTIER_METHODS = ("SAC (UTD 1)", "REDQ (UTD 20)", "DroQ (UTD 20)", "CrossQ (UTD 1)", "SimbaV2 (UTD 2)", "MR.Q")
 
 
-def frontier() -> pd.DataFrame:
-    """The published curves: method, env (v4), env_step, mean, std, n_seeds, source."""
+@functools.cache
+def _frontier_csv() -> pd.DataFrame:
     return pd.read_csv(FRONTIER_CSV, comment="#")
+
+
+def frontier() -> pd.DataFrame:
+    """The published curves: method, env, env_step, mean, std, n_seeds, source. ``env`` is the v5 id this suite runs;
+    the published runs are on its v4 twin (the same task with minor model fixes)."""
+    curves = _frontier_csv().copy()
+    curves["env"] = curves["env"].str.replace("-v4", "-v5")
+    return curves
 
 
 def frontier_at_budget(budget: int = 100_000) -> pd.DataFrame:
@@ -45,8 +54,15 @@ def frontier_at_budget(budget: int = 100_000) -> pd.DataFrame:
     return curves.groupby(["method", "env"], as_index=False).tail(1).reset_index(drop=True)
 
 
-def _v5(env_v4: str) -> str:
-    return env_v4.replace("-v4", "-v5")
+def published(ref: pd.DataFrame, method: str, env: str) -> pd.Series | None:
+    """The row of ``ref`` (:func:`frontier_at_budget`) for ``method`` on ``env``, None if it was not published."""
+    hit = ref[(ref["method"] == method) & (ref["env"] == env)]
+    return None if hit.empty else hit.iloc[0]
+
+
+def _published_mean(ref: pd.DataFrame, method: str, env: str) -> float:
+    row = published(ref, method, env)
+    return float("nan") if row is None else float(row["mean"])
 
 
 def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -56,7 +72,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     final, best, final_over_best, mean_eval, cpu_time, episodes, gradient_steps, timesteps."""
     evals, runs = [], []
     for record in store.read_runs(results_dir):
-        if record.get("status") != "done" or not record.get("timesteps_requested") or not record.get("evaluations"):
+        if not record.get("timesteps_requested") or not record.get("evaluations"):  # read_runs: finished runs only
             continue
         key = {k: record[k] for k in ("algo", "env", "seed")}
         scores = [(e["timesteps"], float(np.mean(e["scores"]))) for e in record["evaluations"]]
@@ -140,12 +156,11 @@ def reference_table(envs: Sequence[str]) -> pd.DataFrame:
     for method in FRONTIER_METHODS:
         line = {"method": method}
         for env in envs:
-            hit = ref[(ref["method"] == method) & (ref["env"].map(_v5) == env)]
+            row = published(ref, method, env)
             line[env] = (
-                f"{hit['mean'].iloc[0]:.0f} ± {hit['std'].iloc[0]:.0f} ({hit['n_seeds'].iloc[0]} seeds, at "
-                f"{hit['env_step'].iloc[0] / 1000:.0f}k)"
-                if not hit.empty
-                else "-"
+                "-"
+                if row is None
+                else f"{row['mean']:.0f} ± {row['std']:.0f} ({row['n_seeds']} seeds, at {row['env_step'] / 1000:.0f}k)"
             )
         lines.append(line)
     return pd.DataFrame(lines)
@@ -157,18 +172,13 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
     if mine.empty:
         return [f"- no finished runs of `{algo}` yet"]
     ref = frontier_at_budget()
-    ref = ref.assign(env=ref["env"].map(_v5))
     out, beats_strong = [], 0
     envs = _envs(mine)
     for env in envs:
         final = mine.loc[mine["env"] == env, "final"].median()
-
-        def published(method: str, env: str = env) -> float:
-            hit = ref[(ref["method"] == method) & (ref["env"] == env)]
-            return float(hit["mean"].iloc[0]) if not hit.empty else float("nan")
-
-        sac, strong = published("SAC (UTD 1)"), max(published("REDQ (UTD 20)"), published("DroQ (UTD 20)"))
-        strong_min = min(published("REDQ (UTD 20)"), published("DroQ (UTD 20)"))
+        sac = _published_mean(ref, "SAC (UTD 1)", env)
+        strong = [_published_mean(ref, method, env) for method in ("REDQ (UTD 20)", "DroQ (UTD 20)")]
+        strong, strong_min = max(strong), min(strong)
         beats_strong += final >= strong_min
         verdict = "met" if final >= sac else f"missed by {sac - final:.0f}"
         out.append(f"- {env}: final {final:.0f}, the published SAC's {sac:.0f}: {verdict} (REDQ/DroQ up to {strong:.0f})")
@@ -189,19 +199,33 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
     """Per run: the env steps of its first evaluation at or above the published SAC's return at ``budget`` steps on
     the env (the level), NaN if none reaches it."""
     ref = frontier_at_budget(budget)
-    level = {
-        _v5(e): m
-        for e, m in zip(
-            ref.loc[ref["method"] == "SAC (UTD 1)", "env"], ref.loc[ref["method"] == "SAC (UTD 1)", "mean"], strict=True
-        )
-    }
     rows = []
     for (algo, env, seed), e in evals.groupby(["algo", "env", "seed"], sort=False):
-        hit = e.loc[e["score"] >= level.get(env, np.inf), "timesteps"]
-        rows.append(
-            {"algo": algo, "env": env, "seed": seed, "level": level.get(env), "steps": hit.min() if len(hit) else np.nan}
-        )
+        level = _published_mean(ref, "SAC (UTD 1)", env)
+        hit = e.loc[e["score"] >= level, "timesteps"]  # NaN level (not published): never reached
+        rows.append({"algo": algo, "env": env, "seed": seed, "level": level, "steps": hit.min() if len(hit) else np.nan})
     return pd.DataFrame(rows)
+
+
+#: Colours: the rows run here bold, the published curves thin and dashed.
+ROW_COLOURS = {"denfac_default": "black", "denfac_data_efficient": "tab:red", "sac_zoo": "tab:blue"}
+OTHER_COLOURS = ("tab:green", "tab:orange", "gold", "teal")
+FRONTIER_COLOURS = ("tab:cyan", "tab:olive", "tab:purple", "tab:brown", "tab:pink", "tab:gray")
+
+
+def _colours(algos) -> dict[str, str]:
+    """One colour per row, the same in every figure: the suite's rows their own, any other the next free one."""
+    others = iter(OTHER_COLOURS * 4)
+    return {algo: ROW_COLOURS.get(algo) or next(others) for algo in dict.fromkeys(algos)}
+
+
+def _legend_entries(axes) -> tuple[list, list[str]]:
+    """The handles and labels of all panels, each label once, in order of appearance."""
+    entries: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    return list(entries.values()), list(entries)
 
 
 def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
@@ -213,15 +237,14 @@ def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     envs = _envs(runs)
-    ref = frontier_at_budget().assign(env=lambda f: f["env"].map(_v5))
-    others = iter(OTHER_COLOURS * 4)
-    colours = {algo: ROW_COLOURS.get(algo) or next(others) for algo in dict.fromkeys(runs["algo"])}
+    ref = frontier_at_budget()
+    colours = _colours(runs["algo"])
     fig, axes = plt.subplots(1, len(envs), figsize=(3.6 * len(envs), 3.3), squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
         for method, colour in (("SAC (UTD 1)", "tab:cyan"), ("REDQ (UTD 20)", "tab:olive")):
-            hit = ref[(ref["method"] == method) & (ref["env"] == env)]
-            if not hit.empty:
-                ax.axhline(hit["mean"].iloc[0], ls="--", lw=1, color=colour, label=f"{method}, published at 100k (v4)")
+            row = published(ref, method, env)
+            if row is not None:
+                ax.axhline(row["mean"], ls="--", lw=1, color=colour, label=f"{method}, published at 100k (v4)")
         for algo, r in runs[runs["env"] == env].groupby("algo", sort=False):
             cpu = r["cpu_time"].median()
             ax.scatter(r["cpu_time"], r["final"], s=10, color=colours[algo], alpha=0.5)
@@ -231,22 +254,11 @@ def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
         ax.set_xlabel("CPU s per run")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("final evaluation at 100k steps")
-    handles, names = [], []
-    for ax in axes[0]:
-        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if lab not in names:
-                handles.append(h)
-                names.append(lab)
+    handles, names = _legend_entries(axes[0])
     fig.legend(handles, names, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.16, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-#: Colours: the rows run here bold, the published curves thin and dashed.
-ROW_COLOURS = {"denfac_default": "black", "denfac_data_efficient": "tab:red", "sac_zoo": "tab:blue"}
-OTHER_COLOURS = ("tab:green", "tab:orange", "gold", "teal")
-FRONTIER_COLOURS = ("tab:cyan", "tab:olive", "tab:purple", "tab:brown", "tab:pink", "tab:gray")
 
 
 def _row_labels(runs: pd.DataFrame, envs: list[str]) -> dict[str, str]:
@@ -271,12 +283,11 @@ def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
     envs = _envs(evals)
     curves = frontier()
     labels = _row_labels(runs, envs)
-    others = iter(OTHER_COLOURS * 4)
-    colours = {algo: ROW_COLOURS.get(algo) or next(others) for algo in labels}
+    colours = _colours(labels)
     fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.6), squeeze=False)
     for ax, env in zip(axes[0], envs, strict=True):
         for method, colour in zip(FRONTIER_METHODS, FRONTIER_COLOURS, strict=True):
-            c = curves[(curves["method"] == method) & (curves["env"].map(_v5) == env)].sort_values("env_step")
+            c = curves[(curves["method"] == method) & (curves["env"] == env)].sort_values("env_step")
             if not c.empty:
                 label = f"{method}, published (v4, {c['n_seeds'].max()} seeds)"
                 ax.plot(c["env_step"] / 1000, c["mean"], ls="--", lw=1, alpha=0.8, color=colour, label=label)
@@ -294,12 +305,7 @@ def plot(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
         ax.set_xlabel("env steps (thousands)")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("evaluation return (10 episodes)")
-    handles, names = [], []
-    for ax in axes[0]:
-        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if lab not in names:
-                handles.append(h)
-                names.append(lab)
+    handles, names = _legend_entries(axes[0])
     mine = [i for i, n in enumerate(names) if n in labels.values()]
     order = mine + [i for i in range(len(names)) if i not in mine]
     fig.legend([handles[i] for i in order], [names[i] for i in order], loc="lower center", ncol=2, fontsize=8, frameon=False)

@@ -234,8 +234,7 @@ def sweep(
             "checkpoint_dir": str(results_dir / "checkpoints") if checkpoint_every > 0 else None,
             "checkpoint_every": checkpoint_every if checkpoint_every > 0 else None,
         }
-        cell = (algo, env, int(seed), budget.episodes, budget.timesteps)
-        (status["skipped"] if cell in finished else tasks).append(task)
+        (status["skipped"] if store.cell_of(task_module.run_key(task)) in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
     if verbose:
         print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
