@@ -1,4 +1,4 @@
-"""Critic-fit diagnostics of the DENFAC ablation (suite ``ablation``, ``benchmarks/ablation.py``): how well Q fits its
+"""Critic-fit diagnostics of the DENFAC ablation (suite ``ablation``, ``configs/ablation.yml``): how well Q fits its
 targets and tracks the Monte-Carlo returns of the stored trajectories, measured on the buffer after an update."""
 
 from __future__ import annotations
@@ -69,14 +69,14 @@ class Diagnostics:
                 q_mc_corr=float(np.corrcoef(qnp, mc)[0, 1]) if qnp.std() > 0 and mc.std() > 0 else float("nan"),
                 q_mc_bias=float((qnp - mc).mean()),
             )
-            stats = getattr(model, "_last_update_stats", None)
+            stats = getattr(model, "last_update", None)  # DENFAC's UpdateStats
         if hasattr(model.critic, "all_q") and len(model.critic.q_networks) >= 2:  # DENFAC's critics
             with th.no_grad():
                 own = model.actor(data.observations).clamp(-1, 1)
             for key, actions in (("grad_sign_agreement", own), ("grad_sign_agreement_data", data.actions)):
                 row[key] = action_gradient_sign_agreement(model.critic, data.observations, actions)
-        if stats is not None and "weights" in stats:
-            row["iw_mean"] = float(stats["weights"].mean())
+        if stats is not None:
+            row["iw_mean"] = float(stats.weights.mean())
         self.rows.append(row)
 
 

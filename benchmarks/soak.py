@@ -64,21 +64,16 @@ def run(episodes: int, env_id: str, seed: int, buffer_size: int | None = None) -
     from stable_baselines3.common.callbacks import BaseCallback
 
     from sb3_denfac import DENFAC
+    from sb3_denfac.common.callbacks import UpdateStatsCallback
 
     kwargs = {} if buffer_size is None else {"buffer_size": buffer_size}
     model = DENFAC("MlpPolicy", gym.make(env_id), seed=seed, **kwargs)
     update_s: list[float] = []
     rss: list[float] = []
-    train = model.train
-
-    def timed_train(*args: Any, **kwargs: Any) -> None:
-        start = time.perf_counter()
-        train(*args, **kwargs)
-        update_s.append(time.perf_counter() - start)
-
-    model.train = timed_train  # type: ignore[method-assign]
 
     class EpisodeEnds(BaseCallback):
+        """The resident memory at each episode's end."""
+
         def _on_step(self) -> bool:
             if self.locals["dones"][0]:
                 rss.append(rss_mib())
@@ -86,9 +81,11 @@ def run(episodes: int, env_id: str, seed: int, buffer_size: int | None = None) -
                     print(f"episode {len(rss)}: rss {rss[-1]:.1f} MiB, last update {update_s[-1] if update_s else 0:.3f} s")
             return True
 
+    update_times = UpdateStatsCallback(lambda stats: update_s.append(stats.seconds))  # each update's wall time
     start = time.perf_counter()
     max_steps = gym.spec(env_id).max_episode_steps or 1000
-    model.learn(episodes * max_steps, callback=EpisodeEnds())  # fixed-length episodes (Pendulum): exactly `episodes`
+    # fixed-length episodes (Pendulum): exactly `episodes`
+    model.learn(episodes * max_steps, callback=[EpisodeEnds(), update_times])
     return {"rss_mib": rss, "update_s": update_s[: len(rss)], "wall_s": time.perf_counter() - start}
 
 

@@ -227,19 +227,12 @@ def time_buffer(path: Path, env_id: str, repeats: int) -> dict:
 def training_run(episodes: int = 50) -> dict:
     """Every update's wall time in a quickstart-like run (Acrobot, Figure 5 settings, seed 0, current threads)."""
     from sb3_denfac import DENFAC
-    from sb3_denfac.common.callbacks import EpisodePerformanceCallback
+    from sb3_denfac.common.callbacks import EpisodePerformanceCallback, UpdateStatsCallback
 
     model = DENFAC("MlpPolicy", gym.make(ENVS["acrobot"]), seed=0, **yaml_settings(ENVS["acrobot"]))
     durations: list[float] = []
-    update = model._update
-
-    def timed_update():
-        start = time.perf_counter()
-        update()
-        durations.append(time.perf_counter() - start)
-
-    model._update = timed_update
-    model.learn(10**8, callback=EpisodePerformanceCallback(max_episodes=episodes))
+    update_times = UpdateStatsCallback(lambda stats: durations.append(stats.seconds))
+    model.learn(10**8, callback=[EpisodePerformanceCallback(max_episodes=episodes), update_times])
     full = durations[-(len(durations) // 2) :]  # the buffer is full (D = 6000) well before the second half
     return dict(
         episodes=episodes,

@@ -27,10 +27,11 @@ _LAZY: dict[str, str] = {
     "DDPG": "sb3_denfac.ddpg",
     "DENFAC": "sb3_denfac.denfac",
     "NFAC": "sb3_denfac.nfac",
+    "SoftDENFAC": "sb3_denfac.soft_denfac",
     "EpisodePerformanceCallback": "sb3_denfac.common.callbacks",
 }
 
-__all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "EpisodePerformanceCallback", "register_envs"]
+__all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "SoftDENFAC", "EpisodePerformanceCallback", "register_envs"]
 
 
 def __getattr__(name: str) -> Any:

@@ -95,11 +95,13 @@ def batch_norm_extractor() -> type[BaseFeaturesExtractor]:
 
 EPISODE = 20  # steps per episode of every test env
 #: Variants: "denfac_plain" is DENFAC on its plain (autograd) update path ("denfac" takes the default, fast when
-#: possible); "ddpg_ig" is DDPG with inverting gradients and an unbounded actor ("ddpg": SB3's tanh actor).
-ALGOS = ["denfac", "denfac_plain", "ddpg", "ddpg_ig", "nfac", "cacla", "cmaes"]
+#: possible); "soft_denfac" is SoftDENFAC; "ddpg_ig" is DDPG with inverting gradients and an unbounded actor ("ddpg":
+#: SB3's tanh actor).
+ALGOS = ["denfac", "denfac_plain", "soft_denfac", "ddpg", "ddpg_ig", "nfac", "cacla", "cmaes"]
 CLASS_PATHS = {
     "denfac": "sb3_denfac.denfac:DENFAC",
     "denfac_plain": "sb3_denfac.denfac:DENFAC",
+    "soft_denfac": "sb3_denfac.soft_denfac:SoftDENFAC",
     "ddpg": "sb3_denfac.ddpg:DDPG",
     "ddpg_ig": "sb3_denfac.ddpg:DDPG",
     "nfac": "sb3_denfac.nfac:NFAC",
@@ -120,6 +122,7 @@ _TINY_DDPG = dict(
 TINY_KWARGS: dict[str, dict[str, Any]] = {
     "denfac": _TINY_DENFAC,
     "denfac_plain": {**_TINY_DENFAC, "update_path": "plain"},
+    "soft_denfac": {**_TINY_DENFAC, "policy_kwargs": dict(net_arch=dict(pi=[4], qf=[8, 4]))},  # SAC's actor: no BN
     "ddpg": _TINY_DDPG,
     "ddpg_ig": {**_TINY_DDPG, "inverting_gradients": True},
     "nfac": dict(
@@ -131,7 +134,7 @@ TINY_KWARGS: dict[str, dict[str, Any]] = {
     "cacla": dict(n_steps=EPISODE, bn_window=4, policy_kwargs=dict(net_arch=dict(pi=[4], vf=[8, 4]))),
     "cmaes": dict(population_size=2, policy_kwargs=dict(net_arch=[4])),
 }
-OFF_POLICY = ["denfac", "denfac_plain", "ddpg", "ddpg_ig"]
+OFF_POLICY = ["denfac", "denfac_plain", "soft_denfac", "ddpg", "ddpg_ig"]
 
 
 def algo_class(name: str) -> type[BaseAlgorithm]:

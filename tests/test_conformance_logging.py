@@ -20,7 +20,7 @@ from stable_baselines3.common.callbacks import ProgressBarCallback as SB3Progres
 from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
-from sb3_denfac.common.logging_keys import RENAMED, TRAIN_KEYS, WITH_AN_OPTION, WRITTEN_BY
+from sb3_denfac.common.logging_keys import RENAMED, TRAIN_KEYS, WRITTEN_BY
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 #: The algorithm (zoo name, the key of ``WRITTEN_BY``) of each tiny variant of conftest.py.
@@ -76,26 +76,14 @@ def test_train_keys_are_the_documented_ones(name: str, episode_steps, make_env, 
     model.set_logger(Logger(folder=None, output_formats=[collector]))
     model.learn(6 * episode_steps, log_interval=1)
     written = {key for key in collector.keys if key.startswith("train/")}
-    assert written == set(WRITTEN_BY[ALGORITHM_OF.get(name, name)]) - WITH_AN_OPTION
+    assert written == set(WRITTEN_BY[ALGORITHM_OF.get(name, name)])
     assert not written & set(RENAMED)
-
-
-def test_soft_actor_writes_sacs_keys() -> None:
-    """DENFAC with its soft actor (ent_coef) writes, on top of its keys, SB3 SAC's train/ent_coef and
-    train/ent_coef_loss: the keys WITH_AN_OPTION."""
-    from sb3_denfac import DENFAC
-
-    collector = KeyCollector()
-    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps=20), ent_coef="auto", seed=0, critic_steps=2)
-    model.set_logger(Logger(folder=None, output_formats=[collector]))
-    model.learn(60, log_interval=1)
-    assert {key for key in collector.keys if key.startswith("train/")} == set(WRITTEN_BY["denfac"])
 
 
 def test_logging_keys_table_is_the_module() -> None:
     """docs/conventions.md's logging-keys table has one row per key of TRAIN_KEYS, with its meaning and the algorithms
     that write it (WRITTEN_BY), in the module's order."""
-    columns = ["denfac", "ddpg", "nfac", "cacla", "cmaes"]
+    columns = ["denfac", "soft_denfac", "ddpg", "nfac", "cacla", "cmaes"]
     assert set(WRITTEN_BY) == set(columns)
     assert all(key in TRAIN_KEYS for keys in WRITTEN_BY.values() for key in keys)
     rows = [line for line in (REPO / "docs" / "conventions.md").read_text().splitlines() if line.startswith("| `train/")]

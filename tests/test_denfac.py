@@ -42,7 +42,7 @@ def test_importance_weights_of_the_update_path_match_scipy(make_denfac):
     actor_before = copy.deepcopy(model.actor)
     data = model.replay_buffer.all_samples()
     model._update()
-    weights = model._last_update_stats["weights"].squeeze(1).numpy()
+    weights = model.last_update.weights.squeeze(1).numpy()
     with th.no_grad():
         target_means = actor_before(data.observations).numpy()
     a, mu_b = data.actions.numpy(), data.behaviour_means.numpy()
@@ -58,7 +58,7 @@ def test_importance_weights_of_the_update_path_match_scipy(make_denfac):
 
     model.weighting = "none"
     model._update()
-    assert th.all(model._last_update_stats["weights"] == 1.0)
+    assert th.all(model.last_update.weights == 1.0)
 
 
 class IncreasingQ(nn.Module):
@@ -86,7 +86,7 @@ def test_inverting_gradients_keep_actor_in_bounds(make_denfac, inverting):
     model.learn(60)
     model.policy.critic = IncreasingQ()  # not an MLP: the autograd updater runs
     obs = model.replay_buffer.all_samples().observations
-    updater = model._make_updater()
+    updater = model.make_updater()
     assert isinstance(updater, AutogradUpdater)
     updater.fit_actor(obs)
     with th.no_grad():
@@ -125,10 +125,10 @@ def test_timeouts_bootstrap_or_not(make_denfac):
     timeout = data.timeouts.squeeze(1).bool()
     model.bootstrap_on_timeout = True
     model._update()
-    assert not th.allclose(model._last_update_stats["q_targets"][timeout], data.rewards[timeout])
+    assert not th.allclose(model.last_update.q_targets[timeout], data.rewards[timeout])
     model.bootstrap_on_timeout = False  # paper-era authors' code: time-limit ends are terminal
     model._update()
-    th.testing.assert_close(model._last_update_stats["q_targets"][timeout], data.rewards[timeout])
+    th.testing.assert_close(model.last_update.q_targets[timeout], data.rewards[timeout])
 
 
 def test_minibatch_and_box_bounds(make_denfac, target_action_env):

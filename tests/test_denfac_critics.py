@@ -56,7 +56,7 @@ def test_update_targets_take_the_minimum_over_the_critics(twin_model):
         q_next = th.cat(before.critic.all_q(data.next_observations, next_actions), dim=1)
     bootstrap = 0.9 * (1.0 - data.dones)
     expected = data.rewards + bootstrap * q_next.min(dim=1, keepdim=True).values
-    th.testing.assert_close(model._last_update_stats["q_targets"], expected)
+    th.testing.assert_close(model.last_update.q_targets, expected)
     assert (expected < data.rewards + bootstrap * q_next[:, :1] - 1e-6).any()  # Q_1 alone would give other targets
 
 
@@ -66,7 +66,7 @@ def test_every_critic_is_fitted_and_the_actor_ascends_q1(twin_model):
     model._update()
     for q_net, old in zip(model.critic.q_networks, before, strict=True):
         assert any(not th.equal(p, old[name]) for name, p in q_net.state_dict().items())
-    updater = model._make_updater()
+    updater = model.make_updater()
     assert isinstance(updater, AutogradUpdater)
 
     def refuse(*args):
@@ -81,7 +81,7 @@ def test_every_critic_is_fitted_and_the_actor_ascends_q1(twin_model):
 
 def test_the_fast_updater_has_every_critic(twin_model):
     model = twin_model(n_critics=3).learn(30)
-    updater = model._make_updater()
+    updater = model.make_updater()
     assert isinstance(updater, FastUpdater) and len(updater.critic_nets) == 3
     obs = model.replay_buffer.all_samples().observations
     actions = updater.actor(obs)

@@ -11,7 +11,8 @@ from torch import nn
 
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.presets import DATA_EFFICIENT, data_efficient
-from sb3_denfac.denfac.updaters import FitSettings, make_updater
+from sb3_denfac.denfac.update_paths import make_updater
+from sb3_denfac.denfac.updaters import FitSettings
 from sb3_denfac.zoo.config import select_entry
 
 SMALL = dict(critic_steps=5, actor_steps=5, batch_size=32, seed=1)

@@ -64,7 +64,7 @@ def test_update_on_real_buffer_computes_no_subnormal(warm_up_model, update_path)
     model.set_logger(configure(None, []))
     model.n_fitted_iterations, model.critic_steps, model.actor_steps = 2, 3, 3
     model._update()  # a first update moves the actor away from its zero-ish initial output
-    weights = model._last_update_stats["weights"]
+    weights = model.last_update.weights
     assert float((weights < 1e-6).float().mean()) > 0.5, "the buffer should hold many far-off-policy samples"
     counter = SubnormalCounter()
     with counter:

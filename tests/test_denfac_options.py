@@ -72,7 +72,7 @@ def test_updater_sets_priorities_from_its_eval_mode_critic(small_model):
     """delta = q - Q_{k-1}(s, a) with the updater's critic; "critic" draws the critic's batches from P, not the
     actor's; "none" draws uniformly without weights (the library's uniform batches)."""
     model = small_model(prioritized="critic", batch_size=16).learn(20)
-    updater = model._make_updater()
+    updater = model.make_updater()
     assert isinstance(updater, AutogradUpdater)
     data = model.replay_buffer.all_samples()
     with th.no_grad():
@@ -83,9 +83,9 @@ def test_updater_sets_priorities_from_its_eval_mode_critic(small_model):
     idx, w = updater.draw(len(q), prioritised=True)
     assert (idx == 3).sum() > 4 and w is not None
     # the actor's mini-batches stay uniform with "critic", and "none" sets no sampler at all
-    sampled = th.cat([model._make_updater().batch_indices(len(q)) for _ in range(200)])
+    sampled = th.cat([model.make_updater().batch_indices(len(q)) for _ in range(200)])
     assert th.bincount(sampled, minlength=len(q)).float().std() < 0.2 * th.bincount(sampled).float().mean()
-    plain = small_model(batch_size=16, update_path="plain").learn(20)._make_updater()
+    plain = small_model(batch_size=16, update_path="plain").learn(20).make_updater()
     plain.set_priorities(data.observations, data.actions, q)
     assert plain.sampler is None
     idx, w = plain.draw(len(q), prioritised=False)
@@ -95,7 +95,7 @@ def test_updater_sets_priorities_from_its_eval_mode_critic(small_model):
 def test_prioritised_critic_loss_uses_the_weights(monkeypatch, small_model):
     """The critic minimises 1/B sum w_i c_i (Q - q)^2 on the prioritised batch."""
     model = small_model(prioritized="critic", batch_size=8, critic_steps=1).learn(20)
-    updater = model._make_updater()
+    updater = model.make_updater()
     data = model.replay_buffer.all_samples()
     obs, actions = data.observations, data.actions
     with th.no_grad():
@@ -151,9 +151,9 @@ def test_huge_proximal_coefficient_keeps_the_actor(small_model):
     assert held_fast < 0.1 * free, (free, held_fast)
     # the old actor is a frozen copy made when the updater is made: the policy's actor is not it
     model = small_model(actor_proximal=1.0, update_path="plain")
-    updater = model._make_updater()
+    updater = model.make_updater()
     assert updater.old_actor is not model.actor and not any(p.requires_grad for p in updater.old_actor.parameters())
-    fast = small_model(actor_proximal=1.0, update_path="fast")._make_updater()  # the fast one: frozen folded affines
+    fast = small_model(actor_proximal=1.0, update_path="fast").make_updater()  # the fast one: frozen folded affines
     obs = th.zeros((3, 2))
     old_fast = fast.actor_net.eval_forward(obs.t(), fast.old_actor_affines).t()
     with th.no_grad():
@@ -167,25 +167,26 @@ def test_huge_proximal_coefficient_keeps_the_actor(small_model):
 # ----- updater choice, validation, save/load ---------------------------------------------------------------------------
 @pytest.mark.parametrize("option", AUTOGRAD_ONLY, ids=lambda o: "prioritized=" + o["prioritized"])
 def test_auto_picks_autograd_and_fast_refuses(option, small_model):
-    assert isinstance(small_model(batch_size=16)._make_updater(), FastUpdater)  # default: fast
-    assert isinstance(small_model(batch_size=16, **option)._make_updater(), AutogradUpdater)
+    assert isinstance(small_model(batch_size=16).make_updater(), FastUpdater)  # default: fast
+    assert isinstance(small_model(batch_size=16, **option).make_updater(), AutogradUpdater)
     name = next(iter(option))
     with pytest.raises(ValueError, match=f"update_path='fast' does not support {name}"):
         small_model(update_path="fast", **option)
     model = small_model(**option)
     model.update_path = "fast"  # set after construction: refused when the update is made
     with pytest.raises(ValueError, match=name):
-        model._make_updater()
+        model.make_updater()
 
 
 def test_auto_picks_fast_for_the_proximal_actor(small_model):
-    assert isinstance(small_model(batch_size=16, actor_proximal=1.0)._make_updater(), FastUpdater)
-    assert isinstance(small_model(actor_proximal=1.0, update_path="plain")._make_updater(), AutogradUpdater)
+    assert isinstance(small_model(batch_size=16, actor_proximal=1.0).make_updater(), FastUpdater)
+    assert isinstance(small_model(actor_proximal=1.0, update_path="plain").make_updater(), AutogradUpdater)
 
 
 def test_make_updater_says_why_auto_fell_back(small_model):
     """make_updater, the one place the updater is chosen, names the reason "auto" did not take the fast updater."""
-    from sb3_denfac.denfac.updaters import FitSettings, make_updater
+    from sb3_denfac.denfac.update_paths import make_updater
+    from sb3_denfac.denfac.updaters import FitSettings
 
     model = small_model(batch_size=16)
     choice = make_updater(model.policy, FitSettings.of(model), "auto")
@@ -228,7 +229,7 @@ def test_save_load_keeps_the_options(tmp_path, target_action_env, small_model):
     model.save(tmp_path / "model.zip")
     loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert {key: getattr(loaded, key) for key in kwargs} == kwargs
-    settings = loaded._make_updater().settings
+    settings = loaded.make_updater().settings
     assert (settings.prioritized, settings.actor_proximal) == ("both", 2.0)
     loaded.learn(20, reset_num_timesteps=False)
     assert loaded._n_updates == 4

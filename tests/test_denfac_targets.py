@@ -12,7 +12,8 @@ import torch as th
 
 from sb3_denfac.denfac import DENFAC
 from sb3_denfac.denfac.policies import combine_critics
-from sb3_denfac.denfac.updaters import FitSettings, make_updater
+from sb3_denfac.denfac.update_paths import make_updater
+from sb3_denfac.denfac.updaters import FitSettings
 
 SMALL = dict(n_fitted_iterations=1, critic_steps=5, actor_steps=5, seed=3, gamma=0.9)
 EXACT = dict(SMALL, target_policy_noise=0.0)  # deterministic next actions: the targets the tests recompute
@@ -41,7 +42,7 @@ def test_mean_critic_target(target_action_env, update_path):
     model._update()
     data = model.replay_buffer.all_samples()
     expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
-    th.testing.assert_close(model._last_update_stats["q_targets"], expected, rtol=1e-4, atol=1e-5)
+    th.testing.assert_close(model.last_update.q_targets, expected, rtol=1e-4, atol=1e-5)
     minimum = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
     assert (expected > minimum + 1e-6).any()  # the default's minimum would give other targets
 
@@ -60,11 +61,11 @@ def test_updaters_agree_on_the_mean(target_action_env):
 
 def test_target_policy_noise_is_clipped_and_redrawn(target_action_env):
     model = DENFAC("MlpPolicy", target_action_env(), target_policy_noise=0.5, target_noise_clip=0.1, **SMALL).learn(30)
-    updater = model._make_updater()
+    updater = model.make_updater()
     next_obs = model.replay_buffer.all_samples().next_observations
     with th.no_grad():
         clean = updater.actor(next_obs)
-        first, second = model._target_actions(updater, next_obs)[0], model._target_actions(updater, next_obs)[0]
+        first, second = model._target_actions(updater, next_obs), model._target_actions(updater, next_obs)
     noise = first - clean.clamp(-1.0, 1.0)
     inside = (clean.abs() < 0.9).squeeze(1)  # away from the bounds, where the clamp cuts nothing
     assert inside.any()
@@ -78,10 +79,10 @@ def test_defaults_and_no_target_noise_is_the_deterministic_next_action(target_ac
     default = DENFAC("MlpPolicy", target_action_env())
     assert (default.critic_target, default.target_policy_noise, default.target_noise_clip) == ("mean", 0.2, 0.5)
     model = DENFAC("MlpPolicy", target_action_env(), **EXACT).learn(30)
-    updater = model._make_updater()
+    updater = model.make_updater()
     next_obs = model.replay_buffer.all_samples().next_observations
     with th.no_grad():
-        th.testing.assert_close(model._target_actions(updater, next_obs)[0], updater.actor(next_obs).clamp(-1.0, 1.0))
+        th.testing.assert_close(model._target_actions(updater, next_obs), updater.actor(next_obs).clamp(-1.0, 1.0))
 
 
 @pytest.mark.parametrize(
@@ -125,16 +126,16 @@ def test_targets_on_the_mini_batches_rows_are_those_of_all_of_d(target_action_en
     before = copy.deepcopy(model.policy)
     before.set_training_mode(False)
     model._update()
-    rows = model._last_update_stats["rows"]
+    rows = model.last_update.rows
     data = model.replay_buffer.all_samples()
     assert rows is not None and len(rows) == 5 * 8  # 5 critic steps x 8 draws out of the 40 transitions
     expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
-    th.testing.assert_close(model._last_update_stats["q_targets"], expected[rows], rtol=1e-4, atol=1e-5)
+    th.testing.assert_close(model.last_update.q_targets, expected[rows], rtol=1e-4, atol=1e-5)
 
 
 def test_iteration_sample(target_action_env):
     model = DENFAC("MlpPolicy", target_action_env(), batch_size=8, critic_steps=6, actor_steps=4, seed=0)
-    updater = model._make_updater()
+    updater = model.make_updater()
     sample = updater.iteration_sample(100)
     assert sample.critic_rows.shape == (48,) and sample.actor_rows.shape == (32,)
     assert sample.critic_batches.shape == (6, 8) and sample.actor_batches.shape == (4, 8)
@@ -145,8 +146,8 @@ def test_iteration_sample(target_action_env):
     counts = th.bincount(draws, minlength=100).float()
     assert counts.min() > 0 and counts.std() < 0.2 * counts.mean()  # uniform over the buffer
     assert updater.iteration_sample(8) is None  # the batch is the whole buffer
-    assert DENFAC("MlpPolicy", target_action_env(), batch_size=None)._make_updater().iteration_sample(100) is None
-    no_actor = DENFAC("MlpPolicy", target_action_env(), batch_size=8, actor_steps=0)._make_updater().iteration_sample(50)
+    assert DENFAC("MlpPolicy", target_action_env(), batch_size=None).make_updater().iteration_sample(100) is None
+    no_actor = DENFAC("MlpPolicy", target_action_env(), batch_size=8, actor_steps=0).make_updater().iteration_sample(50)
     assert no_actor.actor_rows is None and no_actor.actor_batches is None
 
 
@@ -188,7 +189,7 @@ def test_bootstrap_bounds_clip_a_diverged_critic(target_action_env, update_path)
         model._update()
         data = model.replay_buffer.all_samples()
         low, high = bootstrap_range(data.rewards, model.gamma)
-        targets[bounds] = model._last_update_stats["q_targets"]
+        targets[bounds] = model.last_update.q_targets
         bootstrap_max = data.rewards + model.gamma * (1.0 - data.dones) * high
         assert high < 1e3 and (targets[bounds] <= bootstrap_max + 1e-4).all() == bounds
     assert model.logger.name_to_value["train/bootstrap_clip_fraction"] == 1.0  # every value was clipped
@@ -206,7 +207,7 @@ def test_bootstrap_bounds_change_nothing_inside_the_range(target_action_env):
         model.bootstrap_bounds = bounds
         th.manual_seed(0)
         model._update()
-        targets.append(model._last_update_stats["q_targets"])
+        targets.append(model.last_update.q_targets)
     assert model.logger.name_to_value["train/bootstrap_clip_fraction"] == 0.0
     th.testing.assert_close(targets[0], targets[1])
 

@@ -109,12 +109,12 @@ def test_ddpg_gradient_steps_zero_collects_without_training(make_env) -> None:
 
 
 def test_auto_takes_the_autograd_updater_off_the_cpu_and_fast_is_refused(make_model, monkeypatch) -> None:
-    from sb3_denfac.denfac import updaters
+    from sb3_denfac.denfac import update_paths, updaters
     from sb3_denfac.denfac.fast import FastUpdater
 
     model = make_model("denfac")
     settings = updaters.FitSettings.of(model)
-    assert isinstance(updaters.make_updater(model.policy, settings, "auto").updater, FastUpdater)
+    assert isinstance(update_paths.make_updater(model.policy, settings, "auto").updater, FastUpdater)
     cuda = th.device("cuda")
     parameters = model.policy.parameters
 
@@ -122,10 +122,10 @@ def test_auto_takes_the_autograd_updater_off_the_cpu_and_fast_is_refused(make_mo
         device = cuda
 
     monkeypatch.setattr(model.policy, "parameters", lambda: iter([_OnCuda(), *parameters()]))
-    choice = updaters.make_updater(model.policy, settings, "auto")
+    choice = update_paths.make_updater(model.policy, settings, "auto")
     assert isinstance(choice.updater, updaters.AutogradUpdater) and "'cuda'" in choice.fast_refused
     with pytest.raises(ValueError, match="verified on the CPU only.*'cuda'"):
-        updaters.make_updater(model.policy, settings, "fast")
+        update_paths.make_updater(model.policy, settings, "fast")
 
 
 @pytest.mark.algorithms("all")

@@ -31,6 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 # Tiny-run overrides (-params) that only shrink the per-episode work; everything else comes from the YAML entry.
 CHEAP_PARAMS = {
     "denfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
+    "soft_denfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
     "ddpg": ["gradient_steps:1"],
     "nfac": ["n_fitted_iterations:2", "actor_steps:3", "critic_steps:3"],
     "cacla": ["n_steps:100"],
@@ -215,7 +216,8 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
     """Every sampler's output, merged into the YAML entry as the zoo does, passes validation and builds a model; it
     keeps the entry's other policy_kwargs (read from the trial); converter + the same merge == sampler."""
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path(algo)), ENV)
-    entry_policy_kwargs = {"batch_norm": True, **entry["policy_kwargs"]}  # a key besides net_arch, to be kept
+    kept = {"init": "paper"} if algo == "soft_denfac" else {"batch_norm": True}  # SAC's actor has no batch norm
+    entry_policy_kwargs = {**kept, **entry.get("policy_kwargs", {})}  # a key besides net_arch, to be kept
     entry["policy_kwargs"] = entry_policy_kwargs
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     for _ in range(5):
@@ -236,15 +238,14 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
 
 def test_denfac_sampler_tunes_the_stability_options() -> None:
     """The DENFAC sampler offers both values of n_critics, the plain ascent (lambda 0) besides proximal actors, both
-    critic targets with and without smoothing, with and without bootstrap bounds, both actors (the soft one over the
-    paper entry's batch norm and importance weights), and the model the zoo builds from a trial has what was sampled."""
+    critic targets with and without smoothing, with and without bootstrap bounds, and the model the zoo builds from a
+    trial has what was sampled."""
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("denfac")), ENV)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     seen: set[tuple[int, bool]] = set()
     targets: set[tuple[str, bool]] = set()
     bounds: set[bool] = set()
-    actors: set[bool] = set()
-    for _ in range(16):
+    for _ in range(24):
         trial = study.ask()
         trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry["policy_kwargs"])
         sampled = zoo_samplers.sample_denfac_params(trial, 1, 1, {})
@@ -255,15 +256,29 @@ def test_denfac_sampler_tunes_the_stability_options() -> None:
         assert model.target_policy_noise == trial.params["target_policy_noise"]
         assert model.bootstrap_bounds == trial.params["bootstrap_bounds"]
         bounds.add(model.bootstrap_bounds)
-        assert model.policy.soft_actor == (trial.params["actor"] == "soft") == (model.ent_coef == "auto")
-        actors.add(model.policy.soft_actor)
         seen.add((trial.params["n_critics"], trial.params["actor_proximal"] > 0))
         targets.add((trial.params["critic_target"], trial.params["target_policy_noise"] > 0))
         model.get_env().close()
     assert seen == {(1, False), (1, True), (2, False), (2, True)}
     assert targets == {("mean", False), ("mean", True), ("min", False), ("min", True)}
     assert bounds == {False, True}
-    assert actors == {False, True}
+
+
+def test_soft_denfac_sampler_offers_only_its_own_settings() -> None:
+    """SoftDENFAC's sampler tunes the fitted iterations and alpha's start, none of the deterministic actor's settings
+    (which its constructor does not take), and the model the zoo builds from a trial has what was sampled."""
+    entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("soft_denfac")), ENV)
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
+    starts: set[str] = set()
+    for _ in range(8):
+        trial = study.ask()
+        sampled = zoo_samplers.sample_soft_denfac_params(trial, 1, 1, {})
+        assert not {"sigma", "inverting_gradients", "actor_proximal", "target_policy_noise", "weighting"} & set(sampled)
+        model = zoo.make_model("soft_denfac", ENV, {**entry, **sampled}, device="cpu")
+        assert model.ent_coef == trial.params["ent_coef"] and model.critic_target == trial.params["critic_target"]
+        starts.add(model.ent_coef)
+        model.get_env().close()
+    assert starts == {"auto", "auto_0.1", "auto_0.01"}
 
 
 @pytest.mark.parametrize("path", sorted(zoo.HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.stem)

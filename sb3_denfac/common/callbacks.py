@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -143,6 +144,36 @@ class EpisodePerformanceCallback(BaseCallback):
             self.model.save(self.best_model_path)
         finally:
             self.model.policy.load_state_dict(incumbent)
+
+
+class UpdateStatsCallback(BaseCallback):
+    """Hands every end-of-episode update's statistics of DENFAC or SoftDENFAC (``model.last_update``, an
+    :class:`~sb3_denfac.denfac.denfac.UpdateStats`: K_e, wall time, the last fitted iteration's targets and weights) to
+    ``on_update``, once per update: read when the next rollout starts (the update runs between two rollouts) and when
+    training ends (the last update)."""
+
+    def __init__(self, on_update: Callable[[Any], None], verbose: int = 0):
+        super().__init__(verbose)
+        self.on_update = on_update
+        self._seen = 0
+
+    def _read(self) -> None:
+        stats = getattr(self.model, "last_update", None)
+        if stats is not None and stats.n_updates > self._seen:
+            self._seen = stats.n_updates
+            self.on_update(stats)
+
+    def _on_training_start(self) -> None:
+        self._seen = self.model._n_updates  # a learn() that continues an earlier one
+
+    def _on_rollout_start(self) -> None:
+        self._read()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._read()
 
 
 class ProgressBarCallback(SB3ProgressBarCallback):

@@ -184,6 +184,24 @@ def check_model_zip(path: Any) -> Any:
         return None
 
 
+def stored_value(path: Any, key: str) -> Any:
+    """The value a model zip stores under ``key`` in its ``data`` entry, deserialised as SB3 does (None if the file or
+    the key cannot be read: SB3's own ``load`` then reports the problem)."""
+    target = _open_for_read(path)
+    if isinstance(target, pathlib.Path) and not target.exists():
+        return None
+    position = target.tell() if hasattr(target, "tell") else None
+    try:
+        with zipfile.ZipFile(target) as archive:
+            stored = json.loads(archive.read("data").decode())
+        return json_to_data(json.dumps({key: stored[key]})).get(key) if key in stored else None
+    except Exception:  # noqa: BLE001 - an unreadable file is left to SB3's own error
+        return None
+    finally:
+        if position is not None:
+            target.seek(position)
+
+
 def check_model_file_exists(algorithm: str, path: Any) -> None:
     """Raise a ``FileNotFoundError`` naming the file(s) tried if ``path`` (a str or Path) is neither a file nor, with
     ``.zip`` added, one (SB3's own error names ``<path>.zip`` only, e.g. ``model.zip.zip``)."""

@@ -95,19 +95,27 @@ def denfac_attributes_of_old_files(model: Any) -> None:
     model.target_policy_noise, model.target_noise_clip = 0.0, 0.5  # 0.4 and earlier: deterministic next actions
     model.critic_target = "min"  # 0.4 (n_critics 2) took the minimum
     model.bootstrap_bounds = False  # 0.5 and earlier: no bound
-    model.ent_coef, model.target_entropy = None, "auto"  # 0.5 and earlier: the deterministic actor only
 
 
 def record_policy_defaults(policy_kwargs: dict[str, Any], policy_class: type, default_net_arch: dict[str, Any]) -> None:
     """Write ``policy_class``'s own defaults of the keys of :data:`DENFAC_POLICY_KWARGS_OF_OLD_FILES` into
     ``policy_kwargs`` where it does not set them (``net_arch`` None: ``default_net_arch``), so that a saved file says
     which networks it has and a missing key means an older file."""
-    parameters = inspect.signature(policy_class.__init__).parameters
+    parameters = _init_parameters(policy_class)
     for key in DENFAC_POLICY_KWARGS_OF_OLD_FILES:
         if key in policy_kwargs or key not in parameters:
             continue
         value = parameters[key].default
         policy_kwargs[key] = copy.deepcopy(default_net_arch if key == "net_arch" and value is None else value)
+
+
+def _init_parameters(policy_class: type) -> dict[str, inspect.Parameter]:
+    """The keyword parameters of ``policy_class``'s constructor, those its bases take through ``**kwargs`` included."""
+    parameters: dict[str, inspect.Parameter] = {}
+    for klass in reversed(policy_class.__mro__):
+        if "__init__" in vars(klass):
+            parameters.update(inspect.signature(klass.__init__).parameters)
+    return parameters
 
 
 def upgrade_denfac(model: Any) -> None:
@@ -117,9 +125,16 @@ def upgrade_denfac(model: Any) -> None:
         warnings.warn("update_path='compiled' was removed in sb3-denfac 0.2: this model now updates with 'fast'")
         model.update_path = "fast"
     model.gradient_steps = -1  # files saved before update_to_data_ratio say 1 (one update per episode, as now)
+    if model.policy_kwargs.get("soft_actor"):  # SoftDENFAC takes these files over before this point
+        raise ValueError(
+            f"this model was saved by a 0.5 development build with DENFAC's soft actor (ent_coef="
+            f"{getattr(model, 'ent_coef', None)!r}), which is now its own algorithm: load it with SoftDENFAC.load(path)"
+        )
+    if "ent_coef" in model.__dict__ and model.ent_coef is None:  # the 0.5 development builds' deterministic actor
+        del model.ent_coef, model.target_entropy
     for key in ("actor_learning_rate", "critic_learning_rate"):  # written by 0.1 and 0.2, now the algorithm's
         model.policy_kwargs.pop(key, None)
-    accepted = inspect.signature(model.policy_class.__init__).parameters
+    accepted = _init_parameters(model.policy_class)
     for key, value in DENFAC_POLICY_KWARGS_OF_OLD_FILES.items():
         if key in accepted:
             model.policy_kwargs.setdefault(key, copy.deepcopy(value))

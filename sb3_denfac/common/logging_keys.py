@@ -1,10 +1,9 @@
-"""The ``train/`` keys the five algorithms write to SB3's logger (TensorBoard, CSV...): their one list.
+"""The ``train/`` keys the algorithms write to SB3's logger (TensorBoard, CSV...): their one list.
 
 A key means the same thing in every algorithm that writes it; SB3's own names are used where SB3 has one
 (``train/n_updates``, ``train/actor_loss``, ``train/critic_loss``; SB3's single ``train/learning_rate`` is split into
 the two networks' rates). docs/conventions.md shows this list as a table, and tests/test_conformance_logging.py checks
-that each algorithm writes exactly the keys :data:`WRITTEN_BY` gives it (those of :data:`WITH_AN_OPTION` with the option
-on only). SB3's ``rollout/`` and ``time/`` keys are
+that each algorithm writes exactly the keys :data:`WRITTEN_BY` gives it. SB3's ``rollout/`` and ``time/`` keys are
 written by SB3 (CMA-ES writes the same ones itself) and are not listed here.
 """
 
@@ -34,7 +33,7 @@ TRAIN_KEYS: dict[str, str] = {
     "train/fitted_iterations": "K_e, fitted iterations run by the update (K unless update_to_data_ratio is set)",
     "train/bootstrap_clip_fraction": "share of eq. (4)'s bootstrap values at the last fitted iteration that "
     "bootstrap_bounds clipped to the rewards' range, over the rows of q_target_mean (0 without the bounds)",
-    "train/ent_coef": "SAC's entropy coefficient alpha after the update (DENFAC with its soft actor, ent_coef set)",
+    "train/ent_coef": "SAC's entropy coefficient alpha after the update (SoftDENFAC)",
     "train/ent_coef_loss": "the tuned alpha's loss of SAC's eq. 18 at the last actor step (0 with a fixed alpha)",
     "train/actor_out_of_bounds": "fraction of the actor's raw outputs outside [-1, 1] (unbounded actor)",
     "train/cma_sigma": "CMA-ES's step size sigma after the generation",
@@ -52,20 +51,21 @@ _ACTOR_CRITIC = (
     "train/critic_learning_rate",
 )
 
+_DENFAC = (
+    *_ACTOR_CRITIC,
+    "train/q_target_mean",
+    "train/n_transitions",
+    "train/update_time",
+    "train/importance_weight_mean",
+    "train/importance_weight_min",
+    "train/fitted_iterations",
+    "train/bootstrap_clip_fraction",
+)
+
 #: algorithm (zoo name) -> the ``train/`` keys it writes, each a key of :data:`TRAIN_KEYS`.
 WRITTEN_BY: dict[str, tuple[str, ...]] = {
-    "denfac": (
-        *_ACTOR_CRITIC,
-        "train/q_target_mean",
-        "train/n_transitions",
-        "train/update_time",
-        "train/importance_weight_mean",
-        "train/importance_weight_min",
-        "train/fitted_iterations",
-        "train/bootstrap_clip_fraction",
-        "train/ent_coef",
-        "train/ent_coef_loss",
-    ),
+    "denfac": _DENFAC,
+    "soft_denfac": (*_DENFAC, "train/ent_coef", "train/ent_coef_loss"),  # and SB3 SAC's
     "ddpg": (*_ACTOR_CRITIC, "train/q_target_mean", "train/actor_out_of_bounds"),
     "nfac": (*_ACTOR_CRITIC, "train/n_transitions", "train/update_time", "train/positive_td_fraction"),
     "cacla": (*_ACTOR_CRITIC, "train/update_time", "train/positive_td_fraction"),
@@ -78,9 +78,6 @@ WRITTEN_BY: dict[str, tuple[str, ...]] = {
         "train/population_size",
     ),
 }
-
-#: Keys of :data:`WRITTEN_BY` written only with an option on (DENFAC's soft actor, ``ent_coef`` set, writes SB3 SAC's).
-WITH_AN_OPTION: frozenset[str] = frozenset({"train/ent_coef", "train/ent_coef_loss"})
 
 #: Keys written by sb3-denfac 0.4 and earlier -> their names since 0.5 (CHANGELOG.md).
 RENAMED: dict[str, str] = {

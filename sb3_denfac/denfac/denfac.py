@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -12,7 +13,6 @@ from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import update_learning_rate
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
@@ -43,14 +43,36 @@ from sb3_denfac.denfac.options import (
     bootstrap_range,
     check_fitted_iterations,
     check_options,
+    clip_bootstrap,
     fitted_iterations,
 )
-from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, parse_ent_coef
-from sb3_denfac.denfac.updaters import UPDATE_PATHS, FitSettings, Updater, check_update_path, make_updater
+from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.update_paths import (
+    DENFAC_UPDATERS,
+    UPDATE_PATHS,
+    UpdaterClasses,
+    check_update_path,
+    make_updater,
+)
+from sb3_denfac.denfac.updaters import FitSettings, Updater
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
 WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
+
+
+@dataclass(frozen=True)
+class UpdateStats:
+    """What the last end-of-episode update did (``DENFAC.last_update``; None before the first): its number, K_e, its
+    wall time, and the last fitted iteration's targets q_k and weights c of eq. (4) on the rows of D they were computed
+    for (``rows`` None: all of D, in D's order)."""
+
+    n_updates: int
+    fitted_iterations: int
+    seconds: float
+    q_targets: th.Tensor
+    weights: th.Tensor
+    rows: th.Tensor | None
 
 
 class DENFAC(
@@ -123,14 +145,6 @@ class DENFAC(
         their average) or "min" (clipped double Q, 0.4's default)
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
         (:mod:`~.options`; default False, paper: no bound)
-    :param ent_coef: None (default): the deterministic actor mu(s) of eq. (5), exploring with the truncated Gaussian of
-        ``sigma``. Set: the soft actor, SB3 SAC's squashed Gaussian pi(a|s) (:class:`~.policies.DENFACSoftActor`), played
-        as sampled, fitted at every fitted iteration by G steps of SAC's alpha log pi(a|s) - min_j Q_j(s, a) (no
-        proximal term), and soft targets in eq. (4), r + gamma (Q(s', a') - alpha log pi(a'|s')) with a' ~ pi(.|s')
-        (Haarnoja et al. 2018, eqs. 3, 7); alpha is SAC's ``ent_coef``: "auto" (tuned towards ``target_entropy``, from
-        1), "auto_<x>" (tuned, from x) or a float (fixed). Needs ``weighting="none"`` and no batch norm; ``sigma``,
-        ``inverting_gradients``, ``actor_proximal`` and ``target_policy_noise`` are the deterministic actor's
-    :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18; "auto": -dim(A))
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -148,8 +162,13 @@ class DENFAC(
     """
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    #: the two implementations of the update that ``update_path`` picks from (:mod:`~.update_paths`); a subclass that
+    #: fits its networks otherwise names its own (:class:`~sb3_denfac.soft_denfac.SoftDENFAC`)
+    updater_classes: ClassVar[UpdaterClasses] = DENFAC_UPDATERS
     policy: DENFACPolicy
     replay_buffer: DENFACReplayBuffer
+    #: the last update's statistics (:class:`UpdateStats`), None before the first
+    last_update: UpdateStats | None = None
 
     def __init__(
         self,
@@ -185,8 +204,6 @@ class DENFAC(
         target_noise_clip: float = 0.5,
         critic_target: str = "mean",
         bootstrap_bounds: bool = False,
-        ent_coef: str | float | None = None,
-        target_entropy: str | float = "auto",
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -215,16 +232,6 @@ class DENFAC(
         self.target_noise_clip = check_number("target_noise_clip", target_noise_clip, minimum=0.0)
         self.critic_target = check_choice("critic_target", critic_target, CRITIC_TARGETS)
         self.bootstrap_bounds = check_bool("bootstrap_bounds", bootstrap_bounds)
-        self.ent_coef, self.target_entropy = ent_coef, target_entropy
-        if ent_coef is not None:
-            parse_ent_coef(ent_coef)  # a ValueError naming the accepted values
-            if weighting != "none":
-                raise ValueError(
-                    f"weighting={weighting!r} weighs by the truncated Gaussian of the deterministic actor; the soft actor "
-                    "(ent_coef set) needs weighting='none'"
-                )
-            if prioritized == "both":
-                raise ValueError("prioritized='both' is not implemented for the soft actor (ent_coef set): use 'critic'")
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -288,14 +295,7 @@ class DENFAC(
             self.replay_buffer_class = DENFACReplayBuffer
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
             raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
-        self.policy_kwargs["sigma"] = self.sigma
-        if self.ent_coef is not None:  # the soft actor (files saved before ent_coef existed: the deterministic one)
-            self.policy_kwargs.update(soft_actor=True, ent_coef=self.ent_coef, target_entropy=self.target_entropy)
-        elif self.policy_kwargs.get("soft_actor"):
-            raise ValueError(
-                "policy_kwargs soft_actor=True: the soft actor is DENFAC's ent_coef option (which also checks the options "
-                "it needs); use ent_coef='auto' (or a float) instead"
-            )
+        self.policy_kwargs.update(self._policy_settings())
         optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
         if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
             optimizer_kwargs.setdefault("betas", self.adam_betas)
@@ -306,12 +306,9 @@ class DENFAC(
         self._setup_actor_critic_schedules()
         check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
 
-    def _apply_learning_rates(self, progress_remaining: float) -> dict[str, float]:
-        """ActorCriticRatesMixin's rates, and the soft actor's tuned entropy coefficient at the actor's rate."""
-        rates = super()._apply_learning_rates(progress_remaining)
-        if self.policy.ent_coef_optimizer is not None:
-            update_learning_rate(self.policy.ent_coef_optimizer, rates["actor"])
-        return rates
+    def _policy_settings(self) -> dict[str, Any]:
+        """The algorithm's settings its policy is built with (on top of ``policy_kwargs``): the exploration's sigma."""
+        return dict(sigma=self.sigma)
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor
@@ -322,19 +319,8 @@ class DENFAC(
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
         if action_noise is not None:
-            raise ValueError("DENFAC explores with its truncated Gaussian (sigma); action_noise is not supported")
-        if not self.policy.soft_actor or self.num_timesteps < learning_starts:
-            return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
-        # the soft actor: a ~ pi(.|s); D's behaviour mean is its deterministic action tanh(m(s)); one forward pass
-        self.policy.set_training_mode(False)
-        obs, _ = self.policy.obs_to_tensor(self._last_obs)
-        with th.no_grad():
-            mean, log_std, _ = self.actor.get_action_dist_params(obs)
-            sampled = self.actor.action_dist.actions_from_params(mean, log_std)
-        shape = (-1, *self.action_space.shape)  # the actor's (n_envs, dim(A)) as the action space's shape
-        buffer_action = sampled.cpu().numpy().reshape(shape).astype(np.float32)
-        self._last_behaviour_mean = th.tanh(mean).cpu().numpy().reshape(shape).astype(np.float32)
-        return self.policy.unscale_action(buffer_action), buffer_action
+            raise ValueError(f"{type(self).__name__} explores with its own policy; action_noise is not supported")
+        return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
         assert isinstance(replay_buffer, DENFACReplayBuffer)
@@ -352,9 +338,10 @@ class DENFAC(
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
         self._update(fitted_iterations(self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio, gradient_steps))
 
-    def _make_updater(self) -> Updater:
-        """The updater that carries out this update (``update_path``: :func:`~.updaters.make_updater` decides)."""
-        return make_updater(self.policy, FitSettings.of(self), self.update_path).updater
+    def make_updater(self) -> Updater:
+        """The updater that carries out the next update: one of :attr:`updater_classes`, as ``update_path`` picks
+        (:func:`~.update_paths.make_updater`)."""
+        return make_updater(self.policy, FitSettings.of(self), self.update_path, self.updater_classes).updater
 
     def _update(self, n_iterations: int | None = None) -> None:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""
@@ -367,9 +354,8 @@ class DENFAC(
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
-        updater = self._make_updater()
+        updater = self.make_updater()
         bounds = bootstrap_range(rewards, self.gamma) if self.bootstrap_bounds else None
-        clipped = th.zeros(())
         critic_loss = actor_objective = th.zeros(())
         for _ in range(n_iterations):
             # With mini-batches, the iteration's batches are drawn first: q_k and c are then needed on their rows only
@@ -381,13 +367,7 @@ class DENFAC(
             )
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_actions, next_log_prob = self._target_actions(updater, o2)
-                next_q = updater.critic(o2, next_actions)
-                if bounds is not None:
-                    clipped = ((next_q < bounds[0]) | (next_q > bounds[1])).float().mean()
-                    next_q = next_q.clamp(*bounds)
-                if next_log_prob is not None:  # the soft actor: SAC's soft value Q(s', a') - alpha log pi(a'|s')
-                    next_q = next_q - self.policy.entropy_coefficient() * next_log_prob
+                next_q, clipped = self._bootstrap_value(updater, o2, bounds)
                 q_targets = r + self.gamma * (1.0 - done) * next_q
                 weights = self._importance_weights(updater, o, o2, a, lp_b)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
@@ -402,35 +382,43 @@ class DENFAC(
                 actor_objective = updater.fit_actor(obs[sample.actor_rows], sample.actor_batches)
         updater.finish()
         self._n_updates += 1
-        # the last iteration's targets and weights, on the rows of D they were computed for (None: all of D)
-        self._last_update_stats = dict(weights=weights, q_targets=q_targets, rows=rows)
+        self.last_update = UpdateStats(self._n_updates, n_iterations, time.perf_counter() - start, q_targets, weights, rows)
+        self._record_update(updater, critic_loss, actor_objective, clipped, obs.shape[0])
+
+    def _record_update(
+        self, updater: Updater, critic_loss: th.Tensor, actor_objective: th.Tensor, clipped: th.Tensor, n: int
+    ) -> None:
+        """The update's logging keys (docs/conventions.md; :mod:`~sb3_denfac.common.logging_keys`)."""
+        stats = self.last_update
+        assert stats is not None
+        weights = stats.weights
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/critic_loss", float(critic_loss))
         self.logger.record("train/actor_loss", -float(actor_objective))
-        self.logger.record("train/q_target_mean", q_targets.mean().item())
+        self.logger.record("train/q_target_mean", stats.q_targets.mean().item())
         self.logger.record("train/bootstrap_clip_fraction", clipped.item())
-        self.logger.record("train/n_transitions", obs.shape[0])  # |D|
-        self.logger.record("train/update_time", time.perf_counter() - start)
+        self.logger.record("train/n_transitions", n)  # |D|
+        self.logger.record("train/update_time", stats.seconds)
         self.logger.record("train/importance_weight_mean", weights.mean().item())
         self.logger.record("train/importance_weight_min", weights.min().item())
-        self.logger.record("train/fitted_iterations", n_iterations)
-        if self.policy.soft_actor:  # SB3 SAC's keys
-            self.logger.record("train/ent_coef", self.policy.entropy_coefficient().item())
-            self.logger.record("train/ent_coef_loss", updater.ent_coef_loss.item())
+        self.logger.record("train/fitted_iterations", stats.fitted_iterations)
 
-    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor | None]:
-        """The next actions of eq. (4)'s targets, and their log-density under the soft actor (None for the deterministic
-        one). Deterministic actor: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise clipped to
-        +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at every fitted
-        iteration; clamped to the action bounds [-1, 1]. Soft actor: a' ~ pi_{k-1}(.|s'), drawn anew at every fitted
-        iteration (SAC's, eq. 3)."""
-        if self.policy.soft_actor:
-            return updater.sample_actor(next_obs)
+    def _bootstrap_value(
+        self, updater: Updater, next_obs: th.Tensor, bounds: tuple[float, float] | None
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """Q_{k-1}(s', a') of eq. (4) at the next actions a' of :meth:`_target_actions`, clipped to ``bounds``
+        (``bootstrap_bounds``), and the fraction clipped."""
+        return clip_bootstrap(updater.critic(next_obs, self._target_actions(updater, next_obs)), bounds)
+
+    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> th.Tensor:
+        """The next actions of eq. (4)'s targets: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise
+        clipped to +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at
+        every fitted iteration; clamped to the action bounds [-1, 1]."""
         actions = updater.actor(next_obs)
         if self.target_policy_noise > 0:
             noise = th.randn_like(actions) * self.target_policy_noise
             actions = actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)
-        return actions.clamp(-1.0, 1.0), None
+        return actions.clamp(-1.0, 1.0)
 
     def _importance_weights(
         self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor
@@ -464,10 +452,7 @@ class DENFAC(
 
     def _excluded_save_params(self) -> list[str]:
         # gradient_steps: always -1 (_setup_model); a saved -1 would make sb3-denfac <= 0.4.0 update once per step
-        return [*super()._excluded_save_params(), "actor", "critic", "_last_update_stats", "gradient_steps"]
+        return [*super()._excluded_save_params(), "actor", "critic", "last_update", "gradient_steps"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        state_dicts = ["policy", "actor.optimizer", "critic.optimizer"]
-        if self.policy.ent_coef_optimizer is not None:  # the tuned alpha's Adam (log alpha is in the policy's)
-            state_dicts.append("policy.ent_coef_optimizer")
-        return state_dicts, []
+        return ["policy", "actor.optimizer", "critic.optimizer"], []

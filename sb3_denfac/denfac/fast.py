@@ -194,9 +194,10 @@ class _FlatNet:
             offset += n
 
 
-def supported_networks(policy) -> tuple[list[_Layer] | None, list[list[_Layer]]] | None:
+def supported_networks(policy, flat_actor: bool = True) -> tuple[list[_Layer] | None, list[list[_Layer]]] | None:
     """Parsed layers of the actor and of each Q network of the critic if the fast path supports this policy (vector
-    observations, Adam), else None; the actor's are None with the soft actor (fitted by autograd)."""
+    observations, Adam), else None; the actor's are None without ``flat_actor`` (an actor fitted by autograd, as
+    SoftDENFAC's)."""
     from gymnasium import spaces
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
@@ -216,7 +217,7 @@ def supported_networks(policy) -> tuple[list[_Layer] | None, list[list[_Layer]]]
     critic_layers = [parse_bn_mlp(q) for q in policy.critic.q_networks]
     if any(layers is None for layers in critic_layers):
         return None
-    if policy.soft_actor:  # SAC's actor stays on autograd (Updater.fit_soft_actor); the critic's steps are fast
+    if not flat_actor:  # the actor stays on autograd; the critic's steps are fast
         return None, critic_layers  # type: ignore[return-value]
     actor_layers = parse_bn_mlp(policy.actor.mu)
     if actor_layers is None:
@@ -227,10 +228,14 @@ def supported_networks(policy) -> tuple[list[_Layer] | None, list[list[_Layer]]]
 class FastUpdater(Updater):
     """The :class:`~sb3_denfac.denfac.updaters.Updater` on flat parameters with the eager steps of ``eager_steps.py``.
 
-    Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`. With
-    the soft actor (``actor_layers`` None) only the critic is flat: the module's parameters are views of the flat ones,
-    so :meth:`~sb3_denfac.denfac.updaters.Updater.fit_soft_actor` ascends the critic as fitted so far.
+    Needs the policy shapes :func:`supported_networks` accepts; the flat state is written back by :meth:`finish`. A
+    subclass with ``flat_actor = False`` (SoftDENFAC's) gets ``actor_layers`` None: only the critic is flat, and the
+    critic module's parameters are views of the flat ones, so an actor fitted by autograd ascends the critic as fitted
+    so far.
     """
+
+    #: whether the actor is fitted on flat parameters too (False: :func:`supported_networks` parses the critic only)
+    flat_actor: bool = True
 
     def __init__(self, policy, settings: FitSettings, actor_layers: list[_Layer] | None, critic_layers: list[list[_Layer]]):
         super().__init__(policy, settings)
@@ -263,7 +268,7 @@ class FastUpdater(Updater):
     @th.no_grad()
     def actor(self, obs: th.Tensor) -> th.Tensor:
         """pi(s) in eval mode (running statistics), (N, A) like ``policy.actor(obs)``, from the flat parameters."""
-        if self.actor_net is None:  # the soft actor: its deterministic action, from the module
+        if self.actor_net is None:  # an actor fitted by autograd: its mean action, from the module
             self.policy.actor.set_training_mode(False)
             return self.policy.actor(obs)
         return self.actor_net.eval_forward(obs.float().t()).t()
@@ -313,9 +318,7 @@ class FastUpdater(Updater):
     @th.no_grad()
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         net, steps = self.actor_net, self.settings.actor_steps
-        if net is None:
-            with th.enable_grad():
-                return self.fit_soft_actor(obs, batches)
+        assert net is not None, "flat_actor=False: the subclass fits the actor"
         if steps == 0:
             return th.zeros(())
         if self.fresh_bn_statistics(self.policy.actor):

@@ -174,3 +174,12 @@ def bootstrap_range(rewards: th.Tensor, gamma: float) -> tuple[float, float]:
     """(low, high) of the bootstrap bounds (module docstring) from the rewards of D."""
     r_min, r_max, scale = float(rewards.min()), float(rewards.max()), 1.0 / (1.0 - gamma)
     return min(r_min, r_min * scale), max(r_max, r_max * scale)
+
+
+def clip_bootstrap(next_q: th.Tensor, bounds: tuple[float, float] | None) -> tuple[th.Tensor, th.Tensor]:
+    """The bootstrap value of eq. (4) clipped to ``bounds`` (:func:`bootstrap_range`; None: as it is), and the
+    fraction of its values that were clipped."""
+    if bounds is None:
+        return next_q, th.zeros(())
+    clipped = ((next_q < bounds[0]) | (next_q > bounds[1])).float().mean()
+    return next_q.clamp(*bounds), clipped

@@ -9,18 +9,14 @@ two, linear last layer, weights N(0, 0.01), one Q network. Critic hidden layers 
 
 from __future__ import annotations
 
-import math
-import numbers
 from typing import Any
 
-import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BaseModel, BasePolicy
 from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
-from stable_baselines3.sac.policies import Actor as SACActor
 from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
@@ -37,24 +33,6 @@ class DENFACActor(DeterministicActor):
 
     def __init__(self, *args: Any, bn_momentum: float | None = None, sigma: float | None = 0.1, **kwargs: Any):
         super().__init__(*args, bn_momentum=bn_momentum, sigma=sigma, **kwargs)
-
-
-class DENFACSoftActor(SACActor):
-    """The soft actor of DENFAC's ``ent_coef`` option: SB3's SAC actor (Haarnoja et al. 2018), a squashed Gaussian
-    pi(a|s) = tanh(N(m(s), exp(l(s))^2)) whose mean m and log std l (clamped to [-20, 2]) are two linear heads on one MLP
-    (``net_arch`` pi, no batch norm); ``action_log_prob(s)`` gives a reparameterised sample and its log-density.
-
-    ``forward(s)`` is the deterministic action tanh(m(s)), as the deterministic actors' ``forward`` is mu(s) (what
-    exploration and evaluation read as the actor's mean); ``predict(deterministic=False)`` samples pi(.|s). Its weights
-    start (and ``reset_actor`` restarts them) from PyTorch's initialisation, SAC's; the policy's ``init`` applies to
-    the critic.
-    """
-
-    def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
-        return super().forward(obs, deterministic=deterministic)
-
-    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        return super().forward(observation, deterministic=deterministic)
 
 
 class DENFACCritic(BaseModel):
@@ -152,8 +130,9 @@ def combine_critics(values: list[th.Tensor], how: str) -> th.Tensor:
     return stacked.amin(dim=0) if how == "min" else stacked.mean(dim=0)
 
 
-class DENFACPolicy(BasePolicy):
-    """Actor mu(s) and critic Q(s, a) of DENFAC, each with its own Adam optimiser.
+class DENFACBasePolicy(BasePolicy):
+    """An actor and the critic Q(s, a) of DENFAC's family, each with its own Adam optimiser; :meth:`make_actor` builds
+    the actor (:class:`DENFACPolicy`: mu(s); SoftDENFAC's policy: SAC's squashed Gaussian).
 
     :param observation_space: observation space
     :param action_space: Box action space
@@ -175,17 +154,11 @@ class DENFACPolicy(BasePolicy):
     :param optimizer_class: optimiser (default Adam)
     :param optimizer_kwargs: optimiser keyword arguments (DENFAC passes ``betas`` and ``eps``)
     :param n_critics: Q networks of the critic (default 2: clipped double Q, see :class:`DENFACCritic`; paper: 1)
-    :param soft_actor: the actor is :class:`DENFACSoftActor` (SAC's squashed Gaussian), and the policy holds the
-        entropy coefficient of its objective, ``log_ent_coef`` (and its optimiser ``ent_coef_optimizer`` when tuned);
-        DENFAC sets it from its ``ent_coef`` (default False: the deterministic actor mu(s))
-    :param ent_coef: alpha, the entropy coefficient of the soft actor (SB3's SAC ``ent_coef``): "auto" (tuned, from
-        1), "auto_<x>" (tuned, from x) or a float (fixed); unused without ``soft_actor``
-    :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18); "auto": -dim(A)
     :param layer_norm: LayerNorm after every hidden layer of the critic's Q networks (default False; sbx's SAC
         ``layer_norm``, the critics of DroQ and BRO): keeps the values' regression well scaled over many fitted steps
     """
 
-    actor: DENFACActor | DENFACSoftActor
+    actor: nn.Module
     critic: DENFACCritic
 
     def __init__(
@@ -207,9 +180,6 @@ class DENFACPolicy(BasePolicy):
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
         n_critics: int = 2,
-        soft_actor: bool = False,
-        ent_coef: str | float = "auto",
-        target_entropy: str | float = "auto",
         layer_norm: bool = False,
     ):
         super().__init__(
@@ -233,13 +203,6 @@ class DENFACPolicy(BasePolicy):
         self.sigma = sigma
         self.actor_learning_rate = actor_learning_rate
         self.critic_learning_rate = critic_learning_rate
-        self.soft_actor = bool(soft_actor)
-        self.ent_coef, self.target_entropy = ent_coef, target_entropy
-        if self.soft_actor and batch_norm:
-            raise ValueError(
-                "soft_actor (DENFAC's ent_coef) is SAC's squashed Gaussian actor, which has no batch norm: use "
-                "batch_norm=False with it"
-            )
         common = dict(
             observation_space=self.observation_space,
             action_space=self.action_space,
@@ -255,48 +218,14 @@ class DENFACPolicy(BasePolicy):
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
-        if self.soft_actor:
-            kwargs = self._update_features_extractor(self.actor_kwargs)
-            for key in ("batch_norm", "bn_momentum", "init", "sigma"):  # the deterministic actor's
-                kwargs.pop(key)
-            self.actor = DENFACSoftActor(**kwargs)  # type: ignore[arg-type]
-        else:
-            self.actor = DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
+        self.actor = self.make_actor()
         self.critic = DENFACCritic(**self._update_features_extractor(self.critic_kwargs))  # type: ignore[arg-type]
         self.actor.optimizer = self.make_optimizer(self.actor, self.actor_learning_rate, lr_schedule)
         self.critic.optimizer = self.make_optimizer(self.critic, self.critic_learning_rate, lr_schedule)
-        self.ent_coef_optimizer: th.optim.Optimizer | None = None
-        if self.soft_actor:
-            self._build_temperature()
 
-    def _build_temperature(self) -> None:
-        """alpha = exp(log_ent_coef): a parameter with its own Adam optimiser at the actor's rate when tuned (SAC's
-        ``ent_coef="auto"``), a constant buffer when fixed; the target entropy of the tuning (SAC's eq. 18)."""
-        initial, tuned = parse_ent_coef(self.ent_coef)
-        log_value = th.log(th.tensor([initial]))
-        self.target_entropy_value = check_target_entropy(self.target_entropy, self.action_space)
-        if tuned:
-            self.log_ent_coef = nn.Parameter(log_value)
-            lr = self.actor.optimizer.param_groups[0]["lr"]
-            self.ent_coef_optimizer = th.optim.Adam([self.log_ent_coef], lr=lr)
-        else:
-            # not saved: a fixed alpha is the model's ``ent_coef`` (a load with another ``ent_coef`` uses it, as SB3's SAC)
-            self.register_buffer("log_ent_coef", log_value, persistent=False)
-
-    def entropy_coefficient(self) -> th.Tensor:
-        """alpha, detached, shape (1,)."""
-        return self.log_ent_coef.detach().exp()
-
-    def temperature_step(self, log_prob: th.Tensor) -> th.Tensor:
-        """With a tuned alpha, one Adam step on SAC's eq. 18, -log alpha (log pi(a|s) + target entropy) averaged over
-        the samples of ``log_prob`` (detached); returns that loss (0 with a fixed alpha)."""
-        if self.ent_coef_optimizer is None:
-            return th.zeros(())
-        loss = -(self.log_ent_coef * (log_prob.detach() + self.target_entropy_value)).mean()
-        self.ent_coef_optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        self.ent_coef_optimizer.step()
-        return loss.detach()
+    def make_actor(self) -> nn.Module:
+        """The actor, built from ``actor_kwargs``."""
+        raise NotImplementedError
 
     def make_optimizer(self, net: nn.Module, rate: float | Schedule | None, lr_schedule: Schedule) -> th.optim.Optimizer:
         rate = lr_schedule if rate is None else rate
@@ -321,9 +250,6 @@ class DENFACPolicy(BasePolicy):
                 features_extractor_class=self.features_extractor_class,
                 features_extractor_kwargs=self.features_extractor_kwargs,
                 n_critics=self.critic.n_critics,  # validated by the critic
-                soft_actor=self.soft_actor,
-                ent_coef=self.ent_coef,
-                target_entropy=self.target_entropy,
                 layer_norm=self.layer_norm,
             )
         )
@@ -342,7 +268,7 @@ class DENFACPolicy(BasePolicy):
 
     def reset_actor(self) -> None:
         """Re-initialise the actor in place (weights and BN statistics) and forget its Adam state."""
-        reset_parameters_(self.actor, "default" if self.soft_actor else self.init)
+        reset_parameters_(self.actor, self.init)
         self.actor.optimizer.state.clear()
 
     def reset_critic(self) -> None:
@@ -351,30 +277,14 @@ class DENFACPolicy(BasePolicy):
         self.critic.optimizer.state.clear()
 
 
-def parse_ent_coef(ent_coef: str | float) -> tuple[float, bool]:
-    """(initial alpha, tuned) of SB3 SAC's ``ent_coef``: "auto" (1, tuned), "auto_<x>" (x, tuned), a float (fixed)."""
-    tuned = isinstance(ent_coef, str) and (ent_coef == "auto" or ent_coef.startswith("auto_"))
-    value = ("1.0" if ent_coef == "auto" else ent_coef[len("auto_") :]) if tuned else ent_coef  # type: ignore[index]
-    try:
-        initial = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        initial = float("nan")
-    if isinstance(ent_coef, bool) or not 0 < initial < float("inf"):
-        raise ValueError(
-            'ent_coef must be "auto", "auto_<initial value>" or a positive float (SAC\'s entropy coefficient alpha), '
-            f"got {ent_coef!r}"
-        )
-    return initial, tuned
+class DENFACPolicy(DENFACBasePolicy):
+    """DENFAC's actor mu(s) (:class:`DENFACActor`, eq. 5) and critic Q(s, a) (:class:`DENFACCritic`, eq. 4), each with
+    its own Adam optimiser; the parameters are :class:`DENFACBasePolicy`'s."""
 
+    actor: DENFACActor
 
-def check_target_entropy(target_entropy: str | float, action_space: spaces.Space) -> float:
-    """The target entropy of the tuned alpha: "auto" is -dim(A) (SAC's), else a float."""
-    if isinstance(target_entropy, str) and target_entropy == "auto":
-        return -float(get_action_dim(action_space))
-    is_real = isinstance(target_entropy, numbers.Real) and not isinstance(target_entropy, (bool, np.bool_))
-    if not is_real or not math.isfinite(float(target_entropy)):  # type: ignore[arg-type]
-        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
-    return float(target_entropy)  # type: ignore[arg-type]
+    def make_actor(self) -> nn.Module:
+        return DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
 
 
 MlpPolicy = DENFACPolicy

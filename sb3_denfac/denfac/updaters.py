@@ -13,17 +13,16 @@
 - ``fit_critic(s, a, q, c, batches)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for
   each Q network, on the same mini-batches (``batches``, or drawn by the updater);
 - ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
-  (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`); with
-  the soft actor (DENFAC's ``ent_coef``), G steps of SAC's actor and temperature instead (:meth:`Updater.fit_soft_actor`,
-  on the policy's modules in both implementations);
-- ``sample_actor(s)``: the soft actor's a ~ pi(.|s) and log pi(a|s), for the soft targets of eq. (4);
+  (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
+  :class:`~sb3_denfac.soft_denfac.SoftDENFAC`'s updaters fit SAC's actor and temperature instead;
 - ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
 (hand-written steps on flat parameters). Of the options of :mod:`~sb3_denfac.denfac.options`, both implement the
 proximal actor and several critics (``n_critics``); prioritised sampling exists in the autograd updater only.
-:func:`make_updater` is the one place that picks between them (DENFAC's ``update_path``).
+:func:`~sb3_denfac.denfac.update_paths.make_updater` is the one place that picks between them (DENFAC's
+``update_path``).
 """
 
 from __future__ import annotations
@@ -43,7 +42,8 @@ from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backwar
 
 @dataclass(frozen=True)
 class FitSettings:
-    """How the critic and the actor are fitted in every fitted iteration."""
+    """How the critic and the actor are fitted in every fitted iteration: the algorithm's settings, read by
+    :meth:`of` (no defaults of its own: DENFAC's signature is their one home)."""
 
     critic_steps: int  # Adam steps of the critic per fitted iteration
     actor_steps: int  # G, Adam steps of the actor per fitted iteration
@@ -51,13 +51,12 @@ class FitSettings:
     inverting_gradients: bool  # bound the unbounded actor with inverting gradients
     batch_size: int | None  # None: the whole buffer at every step; else one uniform mini-batch per step
     fresh_bn_statistics: bool  # reset the running statistics at the start of every fit (``bn_momentum=None``)
-    prioritized: str = "none"  # "none" (uniform), "critic" or "both": mini-batches drawn by TD error (options.py)
-    priority_alpha: float = 0.6  # p_i = (|delta_i| + eps)^alpha
-    priority_beta: float = 0.4  # w_i = (N P(i))^-beta / max_j (N P(j))^-beta
-    priority_eps: float = 1e-3
-    actor_proximal: float = 0.0  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
-    critic_target: str = "min"  # how several Q networks make the bootstrap value: "min" or "mean" (combine_critics)
-    soft_actor: bool = False  # SAC's squashed Gaussian actor and its entropy coefficient (DENFAC's ``ent_coef``)
+    prioritized: str  # "none" (uniform), "critic" or "both": mini-batches drawn by TD error (options.py)
+    priority_alpha: float  # p_i = (|delta_i| + eps)^alpha
+    priority_beta: float  # w_i = (N P(i))^-beta / max_j (N P(j))^-beta
+    priority_eps: float
+    actor_proximal: float  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
+    critic_target: str  # how several Q networks make the bootstrap value: "min" or "mean" (combine_critics)
 
     @staticmethod
     def of(model: Any) -> FitSettings:
@@ -75,7 +74,6 @@ class FitSettings:
             priority_eps=model.priority_eps,
             actor_proximal=model.actor_proximal,
             critic_target=model.critic_target,
-            soft_actor=model.policy.soft_actor,
         )
 
 
@@ -98,7 +96,6 @@ class Updater(ABC):
     def __init__(self, policy: nn.Module, settings: FitSettings):
         self.policy = policy
         self.settings = settings
-        self.ent_coef_loss = th.zeros(())  # the soft actor's last temperature loss (SAC's eq. 18)
 
     def batch_indices(self, n: int) -> th.Tensor | None:
         """Indices of one uniformly drawn mini-batch out of ``n`` samples (with replacement, as SB3's replay buffers
@@ -174,47 +171,6 @@ class Updater(ABC):
     def finish(self) -> None:  # noqa: B027 (optional hook: the autograd updater keeps nothing outside the modules)
         """Called once after the K fitted iterations."""
 
-    @th.no_grad()
-    def sample_actor(self, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
-        """The soft actor's a ~ pi(.|s) and log pi(a|s), shapes (N, A) and (N, 1), in eval mode."""
-        actor = self.policy.actor
-        actor.set_training_mode(False)
-        actions, log_prob = actor.action_log_prob(obs)
-        return actions, log_prob.unsqueeze(1)
-
-    def fit_soft_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
-        """G Adam steps of the soft actor on SAC's objective (Haarnoja et al. 2018, eq. 7), 1/B sum alpha log pi(a|s) -
-        min_j Q_j(s, a) with a ~ pi(.|s) reparameterised (the critics in eval mode), each followed by one step of the
-        tuned alpha (eq. 18, :meth:`~sb3_denfac.denfac.policies.DENFACPolicy.temperature_step`); no proximal term and no
-        inverting gradients (tanh bounds the actions). Step i reads the rows ``batches[i]`` (None: one uniform mini-batch
-        per step, or the full batch); returns the last objective, the negated loss."""
-        policy, settings = self.policy, self.settings
-        actor, critic = policy.actor, policy.critic
-        objective = th.zeros(())
-        if settings.actor_steps == 0:
-            return objective
-        actor.set_training_mode(True)
-        critic.set_training_mode(False)
-        critic.requires_grad_(False)
-        for step in range(settings.actor_steps):
-            idx = batches[step] if batches is not None else self.batch_indices(obs.shape[0])
-            o = obs if idx is None else obs[idx]
-            ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
-            actions, log_prob = actor.action_log_prob(o)
-            log_prob = log_prob.unsqueeze(1)
-            q = critic.target_q(o, actions, "min")
-            loss = (ent_coef * log_prob - q).mean()
-            actor.optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if settings.max_grad_norm is not None:
-                clip_grad_norm_(actor.parameters(), settings.max_grad_norm)
-            actor.optimizer.step()
-            self.ent_coef_loss = policy.temperature_step(log_prob)
-            objective = -loss.detach()
-        critic.requires_grad_(True)
-        actor.set_training_mode(False)
-        return objective
-
 
 class AutogradUpdater(Updater):
     """Autograd on the policy's modules, ``clip_grad_norm_`` and the modules' own ``torch.optim`` optimizers.
@@ -233,8 +189,8 @@ class AutogradUpdater(Updater):
         twin_ids = {id(p) for group in twins for p in group}
         self.clip_groups = [[p for p in policy.critic.parameters() if id(p) not in twin_ids], *twins]
         self.old_actor: nn.Module | None = None
-        # pi_old: frozen, eval mode (running statistics of the start of the update); the soft actor has no proximal term
-        if settings.actor_proximal > 0 and not settings.soft_actor:
+        # pi_old: frozen, eval mode (running statistics of the start of the update)
+        if settings.actor_proximal > 0:
             self.old_actor = copy.deepcopy(policy.actor)
             self.old_actor.optimizer = None
             self.old_actor.set_training_mode(False)
@@ -294,8 +250,6 @@ class AutogradUpdater(Updater):
 
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         actor, critic, settings = self.policy.actor, self.policy.critic, self.settings
-        if settings.soft_actor:
-            return self.fit_soft_actor(obs, batches)
         objective = th.zeros(())
         if settings.actor_steps == 0:
             return objective
@@ -325,64 +279,3 @@ class AutogradUpdater(Updater):
         critic.requires_grad_(True)
         actor.set_training_mode(False)
         return objective.detach()
-
-
-# ----- which updater ---------------------------------------------------------------------------------------------------
-#: DENFAC's ``update_path`` values: the fast updater where it applies, the fast one (or an error), the autograd one.
-UPDATE_PATHS = ("auto", "fast", "plain")
-
-
-def _options_refusal(settings: FitSettings) -> str | None:
-    """Why the fast updater cannot carry out these settings (an option only the autograd updater implements), or None."""
-    if settings.prioritized != "none":
-        return f"update_path='fast' does not support prioritized={settings.prioritized!r}: use update_path='auto' or 'plain'"
-    return None
-
-
-#: Devices the fast updater is verified on: its tests run on the CPU and, for "nothing assumes the CPU", on the meta
-#: device. Elsewhere (CUDA, MPS...) "auto" takes the autograd updater (standard torch ops) and "fast" is refused.
-FAST_DEVICES = ("cpu", "meta")
-
-
-def _device_refusal(policy: nn.Module) -> str | None:
-    """Why the fast updater is not used on the policy's device, or None on a device it is verified on."""
-    parameter = next(policy.parameters(), None)
-    device = parameter.device.type if parameter is not None else "cpu"
-    if device in FAST_DEVICES:
-        return None
-    return (
-        f"update_path='fast' is verified on the CPU only (its fused Adam kernel and hand-written steps are tested there),"
-        f" the policy is on {device!r}: use update_path='auto' (the autograd updater there) or 'plain'"
-    )
-
-
-def check_update_path(update_path: str, settings: FitSettings) -> None:
-    """At construction, before any network exists: a ValueError if ``update_path="fast"`` asks for an option the fast
-    updater does not implement (the networks are checked by :func:`make_updater`, at the update)."""
-    refusal = _options_refusal(settings)
-    if update_path == "fast" and refusal is not None:
-        raise ValueError(refusal)
-
-
-class UpdaterChoice(NamedTuple):
-    updater: Updater
-    #: why the fast updater was not used ("auto" fell back to the autograd one); None if it was, or with "plain"
-    fast_refused: str | None
-
-
-def make_updater(policy: nn.Module, settings: FitSettings, update_path: str) -> UpdaterChoice:
-    """The updater of one update (``update_path``: "plain" the autograd one; "fast" the fast one, a ValueError saying
-    why where it cannot; "auto" the fast one where it can, else the autograd one), and why the fast one was refused."""
-    from sb3_denfac.denfac.fast import FastUpdater, supported_networks  # fast.py builds on this module
-
-    if update_path == "plain":
-        return UpdaterChoice(AutogradUpdater(policy, settings), None)
-    refusal = _options_refusal(settings) or _device_refusal(policy)
-    layers = supported_networks(policy) if refusal is None else None
-    if refusal is None and layers is None:
-        refusal = "update_path='fast' needs vector observations, the default MLP networks and Adam"
-    if refusal is None:
-        return UpdaterChoice(FastUpdater(policy, settings, *layers), None)  # type: ignore[misc]
-    if update_path == "fast":
-        raise ValueError(refusal)
-    return UpdaterChoice(AutogradUpdater(policy, settings), refusal)

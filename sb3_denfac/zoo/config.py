@@ -37,6 +37,7 @@ from sb3_denfac.envs import ALL_ENV_IDS, ENV_IDS
 #: This package's algorithms, imported lazily by :func:`algorithm_class` ("zoo name" -> "module:Class").
 ALGORITHMS: dict[str, str] = {
     "denfac": "sb3_denfac.denfac:DENFAC",
+    "soft_denfac": "sb3_denfac.soft_denfac:SoftDENFAC",
     "ddpg": "sb3_denfac.ddpg:DDPG",
     "nfac": "sb3_denfac.nfac:NFAC",
     "cacla": "sb3_denfac.cacla:CACLA",

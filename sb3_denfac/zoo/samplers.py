@@ -68,23 +68,18 @@ def _copy_except(params: dict[str, Any], *names: str) -> dict[str, Any]:
 
 
 def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
-    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "n_critics", "actor")
+    """DENFAC's and SoftDENFAC's trial parameters as constructor arguments."""
+    hyperparams = _copy_except(params, "actor_arch", "critic_arch", "n_critics")
     hyperparams["policy_kwargs"] = _policy_kwargs(params)
     if "n_critics" in params:  # a policy keyword argument (the critic), as in SB3's TD3 and SAC
         hyperparams["policy_kwargs"]["n_critics"] = params["n_critics"]
-    if params.get("actor") == "soft":  # SAC's actor: what it needs over a paper entry's batch norm and weights
-        hyperparams.update(ent_coef="auto", weighting="none")
-        hyperparams["policy_kwargs"]["batch_norm"] = False
     return hyperparams
 
 
-def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
-    """DENFAC: alpha_a, alpha_c, K, G, critic steps, D, reset critic, inverting gradient, sigma, network sizes, the
-    proximal actor's lambda, the number of critics, and how eq. (4)'s targets combine them (``critic_target``), smooth
-    the next action (``target_policy_noise``; 0 = the paper's pi(s')) and bound the bootstrap value
-    (``bootstrap_bounds``), and the actor: the deterministic one or the soft one (``ent_coef="auto"``, with
-    ``weighting="none"`` and no batch norm, which it needs)."""
-    params = {
+def _fitted_iteration_params(trial: optuna.Trial) -> dict[str, Any]:
+    """What DENFAC and SoftDENFAC share: alpha_a, alpha_c, K, G, critic steps, D, reset critic, network sizes, the
+    number of critics, and how eq. (4)'s targets combine them (``critic_target``) and bound the bootstrap value."""
+    return {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
         "n_fitted_iterations": trial.suggest_int("n_fitted_iterations", 1, 20),
@@ -92,16 +87,34 @@ def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, addit
         "critic_steps": trial.suggest_int("critic_steps", 5, 50),
         "buffer_size": trial.suggest_categorical("buffer_size", [1000, 3000, 6000, 10000, 100_000]),
         "reset_critic": trial.suggest_categorical("reset_critic", [False, True]),
-        "inverting_gradients": trial.suggest_categorical("inverting_gradients", [False, True]),
-        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
-        "actor_proximal": trial.suggest_categorical("actor_proximal", [0.0, 0.3, 1.0, 3.0]),
         "n_critics": trial.suggest_categorical("n_critics", [1, 2]),
         "critic_target": trial.suggest_categorical("critic_target", ["mean", "min"]),
-        "target_policy_noise": trial.suggest_categorical("target_policy_noise", [0.0, 0.1, 0.2, 0.3]),
         "bootstrap_bounds": trial.suggest_categorical("bootstrap_bounds", [False, True]),
-        "actor": trial.suggest_categorical("actor", ["deterministic", "soft"]),
+    }
+
+
+def sample_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """DENFAC: the shared fitted-iteration parameters (:func:`_fitted_iteration_params`), and its deterministic actor's:
+    inverting gradient, sigma, the proximal actor's lambda and the targets' next-action smoothing
+    (``target_policy_noise``; 0 = the paper's pi(s'))."""
+    params = {
+        **_fitted_iteration_params(trial),
+        "inverting_gradients": trial.suggest_categorical("inverting_gradients", [False, True]),
+        "sigma": trial.suggest_float("sigma", 0.01, 0.5, log=True),
+        "actor_proximal": trial.suggest_categorical("actor_proximal", [0.0, 0.3, 1.0, 3.0]),
+        "target_policy_noise": trial.suggest_categorical("target_policy_noise", [0.0, 0.1, 0.2, 0.3]),
+    }
+    return _sampled(trial, convert_denfac_params(params))
+
+
+def sample_soft_denfac_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """SoftDENFAC: the shared fitted-iteration parameters (:func:`_fitted_iteration_params`), and SAC's entropy
+    coefficient: its start, tuned (``ent_coef="auto_<x>"``)."""
+    params = {
+        **_fitted_iteration_params(trial),
+        "ent_coef": trial.suggest_categorical("ent_coef", ["auto", "auto_0.1", "auto_0.01"]),
     }
     return _sampled(trial, convert_denfac_params(params))
 
@@ -211,6 +224,7 @@ def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
 #: Zoo name -> sampler / converter, registered into rl_zoo3.hyperparams_opt by :func:`sb3_denfac.zoo.config.register`.
 SAMPLERS = {
     "denfac": sample_denfac_params,
+    "soft_denfac": sample_soft_denfac_params,
     "ddpg": sample_ddpg_params,
     "nfac": sample_nfac_params,
     "cacla": sample_cacla_params,
@@ -218,6 +232,7 @@ SAMPLERS = {
 }
 CONVERTERS = {
     "denfac": convert_denfac_params,
+    "soft_denfac": convert_denfac_params,
     "ddpg": convert_ddpg_params,
     "nfac": convert_value_critic_params,
     "cacla": convert_value_critic_params,

@@ -17,9 +17,7 @@ HERE = Path(__file__).parent
 
 if __name__ == "__main__":
     env = gym.make("Pendulum-v1", max_episode_steps=50)
-    model = DENFAC(
-        "MlpPolicy", env, ent_coef="auto_0.5", target_entropy=-0.5, bootstrap_bounds=True, critic_steps=5, seed=0
-    )
+    model = DENFAC("MlpPolicy", env, ent_coef="auto_0.5", target_entropy=-0.5, bootstrap_bounds=True, critic_steps=5, seed=0)
     model.learn(200)
     model.save(HERE / "denfac_soft_v0.5dev_pendulum.zip")
     obs = np.stack([env.observation_space.sample() for _ in range(4)]).astype(np.float32)

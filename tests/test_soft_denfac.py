@@ -1,7 +1,11 @@
-"""DENFAC's soft actor (``ent_coef``): SB3 SAC's squashed Gaussian actor and soft targets inside Algorithm 1's fitted
-iterations. Construction, bad input, the targets and the temperature step, save/load, and one learning test."""
+"""SoftDENFAC: SB3 SAC's squashed Gaussian actor and soft targets inside Algorithm 1's fitted iterations. Construction,
+bad input, the targets and the temperature step, both updaters, save/load (the 0.5 development builds' files of
+``DENFAC(..., ent_coef=...)`` included), and learning tests."""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -9,24 +13,27 @@ import pytest
 import torch as th
 from stable_baselines3.sac.policies import Actor as SACActor
 
-from sb3_denfac.denfac import DENFAC
+from sb3_denfac import DENFAC, SoftDENFAC
 from sb3_denfac.denfac.fast import FastUpdater
-from sb3_denfac.denfac.policies import DENFACActor, combine_critics
+from sb3_denfac.denfac.policies import combine_critics
+from sb3_denfac.soft_denfac.updaters import SoftAutogradUpdater, SoftFastUpdater
+
+DATA = Path(__file__).parent / "data"
 
 SMALL = dict(gamma=0.0, n_fitted_iterations=2, critic_steps=20, actor_steps=10, seed=1)
 
 
 @pytest.fixture
 def soft_model(target_action_env):
-    def make(**kwargs) -> DENFAC:
-        return DENFAC("MlpPolicy", target_action_env(), **{**SMALL, "ent_coef": "auto", **kwargs})
+    def make(**kwargs) -> SoftDENFAC:
+        return SoftDENFAC("MlpPolicy", target_action_env(), **{**SMALL, **kwargs})
 
     return make
 
 
-def test_ent_coef_builds_sacs_actor_and_its_temperature(soft_model, target_action_env):
+def test_builds_sacs_actor_and_its_temperature(soft_model):
     model = soft_model()
-    assert isinstance(model.actor, SACActor) and model.policy.soft_actor
+    assert isinstance(model.actor, SACActor) and model.ent_coef == "auto" and model.bootstrap_bounds
     assert model.policy.entropy_coefficient().item() == pytest.approx(1.0)  # "auto": from 1, as SB3's SAC
     assert model.policy.target_entropy_value == -1.0  # -dim(A)
     assert model.policy.ent_coef_optimizer is not None
@@ -34,8 +41,17 @@ def test_ent_coef_builds_sacs_actor_and_its_temperature(soft_model, target_actio
     assert fixed.policy.ent_coef_optimizer is None and not fixed.policy.log_ent_coef.requires_grad
     assert fixed.policy.entropy_coefficient().item() == pytest.approx(0.05)
     assert soft_model(ent_coef="auto_0.1").policy.entropy_coefficient().item() == pytest.approx(0.1)
-    plain = DENFAC("MlpPolicy", target_action_env(), **SMALL)  # the default: the deterministic actor, no alpha
-    assert isinstance(plain.actor, DENFACActor) and not plain.policy.soft_actor and plain.ent_coef is None
+
+
+def test_denfac_has_no_soft_actor_arguments(target_action_env):
+    """The soft actor is its own class: DENFAC refuses its arguments as SB3 refuses an unknown one, and SoftDENFAC
+    takes none of the deterministic actor's."""
+    for kwargs in (dict(ent_coef="auto"), dict(target_entropy=-1.0)):
+        with pytest.raises(TypeError, match="unexpected keyword"):
+            DENFAC("MlpPolicy", target_action_env(), **kwargs)
+    for kwargs in (dict(sigma=0.2), dict(weighting="retrace"), dict(actor_proximal=1.0), dict(target_policy_noise=0.1)):
+        with pytest.raises(TypeError, match="unexpected keyword"):
+            SoftDENFAC("MlpPolicy", target_action_env(), **kwargs)
 
 
 def test_bad_input_names_the_cause(soft_model):
@@ -44,13 +60,11 @@ def test_bad_input_names_the_cause(soft_model):
         (dict(ent_coef="auto_-1"), "ent_coef must be"),
         (dict(ent_coef=0.0), "ent_coef must be"),
         (dict(ent_coef=True), "ent_coef must be"),
-        (dict(weighting="retrace"), "needs weighting='none'"),
-        (dict(prioritized="both"), "not implemented for the soft actor"),
+        (dict(prioritized="both"), "use prioritized='critic'"),
         (dict(policy_kwargs=dict(batch_norm=True)), "no batch norm"),
         (dict(target_entropy="high"), "target_entropy must be"),
         (dict(target_entropy=float("nan")), "target_entropy must be"),
         (dict(target_entropy=float("-inf")), "target_entropy must be"),
-        (dict(ent_coef=None, policy_kwargs=dict(soft_actor=True)), "the soft actor is DENFAC's ent_coef option"),
     ]:
         with pytest.raises(ValueError, match=match):
             soft_model(**kwargs)
@@ -62,7 +76,7 @@ def test_target_entropy_takes_numpy_numbers(soft_model):
     assert soft_model(target_entropy=np.float32(-0.5)).policy.target_entropy_value == -0.5
 
 
-def test_soft_actor_on_a_matrix_action_space(target_action_env):
+def test_soft_denfac_on_a_matrix_action_space(target_action_env):
     """A Box action space of shape (2, 2): the played and predicted actions have its shape."""
     from gymnasium import spaces
 
@@ -78,13 +92,13 @@ def test_soft_actor_on_a_matrix_action_space(target_action_env):
             obs = self.np_random.uniform(-1, 1, 2).astype(np.float32)
             return obs, reward, False, self.t >= self.episode_length, {}
 
-    model = DENFAC("MlpPolicy", MatrixActionEnv(), **SMALL, ent_coef="auto").learn(30)
+    model = SoftDENFAC("MlpPolicy", MatrixActionEnv(), **SMALL).learn(30)
     obs = np.zeros((3, 2), np.float32)
     assert model.predict(obs, deterministic=True)[0].shape == (3, 2, 2)
     assert model.replay_buffer.actions.shape[1:] == (1, 4)
 
 
-def test_soft_actor_explores_by_sampling(soft_model):
+def test_soft_denfac_explores_by_sampling(soft_model):
     """Played actions are pi's samples (spread around tanh(m(s)), inside [-1, 1]); D's behaviour mean is tanh(m(s))."""
     model = soft_model()
     model.learn(1)  # sets up the env
@@ -97,28 +111,23 @@ def test_soft_actor_explores_by_sampling(soft_model):
     assert len(deterministic) == 1
 
 
-def test_soft_targets_subtract_alpha_log_pi(soft_model, monkeypatch):
+def test_soft_targets_subtract_alpha_log_pi(soft_model):
     """q = r + gamma (1 - d) (Qbar(s', a') - alpha log pi(a'|s')), a' ~ pi(.|s'), Qbar the critics' mean (eq. 4 with SAC's
-    soft value): recomputed from the same draw."""
-    model = soft_model(gamma=0.9, batch_size=None, n_fitted_iterations=1, ent_coef=0.3)
+    soft value): recomputed from the same draw (the same seed, the networks as before the update)."""
+    model = soft_model(gamma=0.9, batch_size=None, n_fitted_iterations=1, ent_coef=0.3, bootstrap_bounds=False)
     model.learn(40)  # a few episodes in D
-    draws = {}
-    original = model._target_actions
-
-    def recording(updater, next_obs):
-        draws["actions"], draws["log_prob"] = original(updater, next_obs)
-        return draws["actions"], draws["log_prob"]
-
-    monkeypatch.setattr(model, "_target_actions", recording)
-    critic_state = {k: v.clone() for k, v in model.critic.state_dict().items()}
+    before = {k: v.clone() for k, v in model.policy.state_dict().items()}
+    th.manual_seed(5)
     model._update()
     data = model.replay_buffer.all_samples()
-    model.critic.load_state_dict(critic_state)  # Q_{k-1}: the critic before the update
+    model.policy.load_state_dict(before)  # (Q_{k-1}, pi_{k-1}): the networks before the update
+    th.manual_seed(5)  # full batch: the targets' draw is the update's first
+    actions, log_prob = model.make_updater().sample_actor(data.next_observations)
     with th.no_grad():
-        q_bar = combine_critics(model.critic.all_q(data.next_observations, draws["actions"]), "mean")
-    expected = data.rewards + 0.9 * (1 - data.dones) * (q_bar - 0.3 * draws["log_prob"])
-    th.testing.assert_close(model._last_update_stats["q_targets"], expected, rtol=1e-5, atol=1e-5)
-    assert draws["log_prob"].shape == (data.rewards.shape[0], 1)
+        q_bar = combine_critics(model.critic.all_q(data.next_observations, actions), "mean")
+    expected = data.rewards + 0.9 * (1 - data.dones) * (q_bar - 0.3 * log_prob)
+    th.testing.assert_close(model.last_update.q_targets, expected, rtol=1e-5, atol=1e-5)
+    assert log_prob.shape == (data.rewards.shape[0], 1) and log_prob.std() > 0
 
 
 def test_tuned_alpha_follows_the_entropy(soft_model):
@@ -131,15 +140,29 @@ def test_tuned_alpha_follows_the_entropy(soft_model):
 
 def test_fast_updater_fits_the_critic_only(soft_model):
     model = soft_model(update_path="fast")
-    updater = model._make_updater()
-    assert isinstance(updater, FastUpdater) and updater.actor_net is None and len(updater.critic_nets) == 2
+    updater = model.make_updater()
+    assert isinstance(updater, SoftFastUpdater) and updater.actor_net is None and len(updater.critic_nets) == 2
+    assert isinstance(soft_model(update_path="plain").make_updater(), SoftAutogradUpdater)
+    assert isinstance(soft_model(prioritized="critic").make_updater(), SoftAutogradUpdater)  # "auto" falls back
+
+
+def test_fast_and_plain_updaters_agree(soft_model):
+    """Fast critic steps, the actor and alpha on autograd in both, on the same draws: the same losses, parameters and
+    Adam moments (as DENFAC's test_fast_and_plain_paths_agree)."""
+    from tests.test_denfac_updaters import assert_same_update
+
+    kwargs = dict(gamma=0.99, batch_size=32, learning_rate=0.01, policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])))
+    plain, fast = (soft_model(update_path=path, **kwargs).learn(100) for path in ("plain", "fast"))
+    assert isinstance(fast.make_updater(), FastUpdater)
+    assert_same_update(plain, fast)
+    assert plain.policy.log_ent_coef.item() == pytest.approx(fast.policy.log_ent_coef.item(), rel=1e-5)
 
 
 def test_a_fixed_alpha_is_the_models_ent_coef_after_a_load(tmp_path, soft_model, target_action_env):
     """As SB3's SAC: a fixed alpha is not a saved value; ``load(..., ent_coef=x)`` trains on with x."""
     soft_model(ent_coef=0.1).learn(40).save(tmp_path / "model.zip")
-    assert DENFAC.load(tmp_path / "model.zip").policy.entropy_coefficient().item() == pytest.approx(0.1)
-    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env(), ent_coef=0.5)
+    assert SoftDENFAC.load(tmp_path / "model.zip").policy.entropy_coefficient().item() == pytest.approx(0.1)
+    loaded = SoftDENFAC.load(tmp_path / "model.zip", env=target_action_env(), ent_coef=0.5)
     assert loaded.policy.entropy_coefficient().item() == pytest.approx(0.5)
 
 
@@ -147,7 +170,7 @@ def test_save_load_is_exact(tmp_path, soft_model, target_action_env):
     """The file keeps the actor, alpha and alpha's Adam state: a reloaded model continues exactly as the original."""
     model = soft_model(ent_coef="auto_0.5", target_entropy=-0.5).learn(60)
     model.save(tmp_path / "model.zip")
-    loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
+    loaded = SoftDENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert isinstance(loaded.actor, SACActor) and (loaded.ent_coef, loaded.target_entropy) == ("auto_0.5", -0.5)
     assert loaded.policy.log_ent_coef.item() == model.policy.log_ent_coef.item() != np.log(0.5)
     before = model.policy.ent_coef_optimizer.state_dict()["state"][0]
@@ -164,15 +187,46 @@ def test_save_load_is_exact(tmp_path, soft_model, target_action_env):
         m._update()
     for name, value in model.policy.state_dict().items():
         th.testing.assert_close(loaded.policy.state_dict()[name], value, msg=name)
+    with pytest.raises(ValueError, match="saved by another algorithm.*SoftDENFACPolicy"):
+        DENFAC.load(tmp_path / "model.zip")
 
 
-def test_soft_actor_learns_target_action(target_action_env):
+def test_files_of_the_soft_actor_option_load_and_train_as_before(target_action_env):
+    """``tests/data/denfac_soft_v0.5dev_pendulum.zip`` was saved by ``DENFAC(..., ent_coef="auto_0.5")`` of the 0.5
+    development builds (``tests/data/make_v0.5dev_soft_fixture.py``). SoftDENFAC loads it with its networks, alpha and
+    settings; DENFAC refuses it, naming SoftDENFAC; and SoftDENFAC, built with the same arguments, trains exactly as that
+    build did (the same alpha and actions after the same run)."""
+    expected = json.loads((DATA / "soft_v0.5dev_pendulum_expected.json").read_text())
+    obs = np.asarray(expected["obs"], dtype=np.float32)
+    loaded = SoftDENFAC.load(DATA / "denfac_soft_v0.5dev_pendulum.zip", device="cpu")
+    assert sorted(loaded.policy.state_dict()) == expected["keys"]
+    assert (loaded.ent_coef, loaded.target_entropy, loaded.bootstrap_bounds) == ("auto_0.5", -0.5, True)
+    assert loaded.policy.log_ent_coef.item() == expected["log_ent_coef"]
+    np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], expected["actions"], rtol=1e-6)
+    loaded.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
+    loaded.learn(100, reset_num_timesteps=False)
+    assert loaded.policy.log_ent_coef.item() != expected["log_ent_coef"]
+    with pytest.raises(ValueError, match="load it with SoftDENFAC.load"):
+        DENFAC.load(DATA / "denfac_soft_v0.5dev_pendulum.zip")
+    rebuilt = SoftDENFAC(
+        "MlpPolicy",
+        gym.make("Pendulum-v1", max_episode_steps=50),
+        ent_coef="auto_0.5",
+        target_entropy=-0.5,
+        critic_steps=5,
+        seed=0,
+    ).learn(200)
+    assert rebuilt.policy.log_ent_coef.item() == expected["log_ent_coef"]
+    np.testing.assert_allclose(rebuilt.predict(obs, deterministic=True)[0], expected["actions"], rtol=1e-6)
+
+
+def test_soft_denfac_learns_target_action(target_action_env):
     """The soft actor's deterministic action tanh(m(s)) moves to the rewarded action 0.6, as the deterministic actor
     does in test_default_configuration_learns_target_action. alpha starts at 0.01: from "auto"'s 1 it falls by about
     1e-3 per actor step, and against rewards of order 0.1 the entropy term holds the mean back for the first few
     hundred steps (measured: 0.13-0.16 off at 200 steps, 0.06-0.11 at 400)."""
     env = target_action_env()
-    model = DENFAC("MlpPolicy", env, **SMALL, ent_coef="auto_0.01")
+    model = SoftDENFAC("MlpPolicy", env, **SMALL, ent_coef="auto_0.01")
     obs = np.stack([env.observation_space.sample() for _ in range(64)])
     start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
     model.learn(200)
@@ -180,12 +234,11 @@ def test_soft_actor_learns_target_action(target_action_env):
     assert end < 0.1 and end < start / 2, (start, end)
 
 
-def test_soft_actor_swings_pendulum_up():
-    """Pendulum-v1, 12 episodes of 200 steps with the library settings and the soft actor (bootstrap_bounds, as
-    benchmarked): the last deterministic episode swings up (return above -400; a random or untrained policy scores
-    -1000 to -1600)."""
+def test_soft_denfac_swings_pendulum_up():
+    """Pendulum-v1, 12 episodes of 200 steps with SoftDENFAC's defaults: the last deterministic episode swings up
+    (return above -400; a random or untrained policy scores -1000 to -1600)."""
     env = gym.make("Pendulum-v1")
-    model = DENFAC("MlpPolicy", env, ent_coef="auto", bootstrap_bounds=True, seed=0)
+    model = SoftDENFAC("MlpPolicy", env, seed=0)
     model.learn(12 * 200)
     eval_env = gym.make("Pendulum-v1")
     returns = []

@@ -1,0 +1,80 @@
+"""SoftDENFAC's updaters: DENFAC's two implementations of Algorithm 1's update with SAC's actor step.
+
+The critic's steps are DENFAC's (autograd, or the fast updater's flat ones); the actor and its temperature are fitted on
+the policy's modules by autograd in both (:class:`SoftActorFit`), and the targets' next actions are sampled from the
+actor (:meth:`SoftActorFit.sample_actor`).
+"""
+
+from __future__ import annotations
+
+import torch as th
+from torch import nn
+from torch.nn.utils import clip_grad_norm_
+
+from sb3_denfac.denfac.fast import FastUpdater
+from sb3_denfac.denfac.update_paths import UpdaterClasses
+from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
+
+
+class SoftActorFit(Updater):
+    """SAC's actor step in the fitted iterations (mixed in before an :class:`~sb3_denfac.denfac.updaters.Updater`)."""
+
+    def __init__(self, policy: nn.Module, settings: FitSettings, *args, **kwargs):
+        super().__init__(policy, settings, *args, **kwargs)  # type: ignore[call-arg]
+        self.ent_coef_loss = th.zeros(())  # the last temperature loss (SAC's eq. 18)
+
+    @th.no_grad()
+    def sample_actor(self, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        """a ~ pi(.|s) and log pi(a|s), shapes (N, A) and (N, 1), in eval mode."""
+        actor = self.policy.actor
+        actor.set_training_mode(False)
+        actions, log_prob = actor.action_log_prob(obs)
+        return actions, log_prob.unsqueeze(1)
+
+    def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
+        """G Adam steps of the actor on SAC's objective (Haarnoja et al. 2018, eq. 7), 1/B sum alpha log pi(a|s) -
+        min_j Q_j(s, a) with a ~ pi(.|s) reparameterised (the critics in eval mode), each followed by one step of the
+        tuned alpha (eq. 18, :meth:`~sb3_denfac.soft_denfac.policies.SoftDENFACPolicy.temperature_step`); no proximal
+        term and no inverting gradients (tanh bounds the actions). Step i reads the rows ``batches[i]`` (None: one
+        uniform mini-batch per step, or the full batch); returns the last objective, the negated loss."""
+        policy, settings = self.policy, self.settings
+        actor, critic = policy.actor, policy.critic
+        objective = th.zeros(())
+        if settings.actor_steps == 0:
+            return objective
+        with th.enable_grad():
+            actor.set_training_mode(True)
+            critic.set_training_mode(False)
+            critic.requires_grad_(False)
+            for step in range(settings.actor_steps):
+                idx = batches[step] if batches is not None else self.batch_indices(obs.shape[0])
+                o = obs if idx is None else obs[idx]
+                ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
+                actions, log_prob = actor.action_log_prob(o)
+                log_prob = log_prob.unsqueeze(1)
+                loss = (ent_coef * log_prob - critic.target_q(o, actions, "min")).mean()
+                actor.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                if settings.max_grad_norm is not None:
+                    clip_grad_norm_(actor.parameters(), settings.max_grad_norm)
+                actor.optimizer.step()
+                self.ent_coef_loss = policy.temperature_step(log_prob)
+                objective = -loss.detach()
+            critic.requires_grad_(True)
+            actor.set_training_mode(False)
+        return objective
+
+
+class SoftAutogradUpdater(SoftActorFit, AutogradUpdater):
+    """DENFAC's autograd updater with SAC's actor step."""
+
+
+class SoftFastUpdater(SoftActorFit, FastUpdater):
+    """DENFAC's fast updater for the critic (the critic module's parameters are views of its flat ones, so the actor's
+    autograd steps ascend the critic as fitted so far), SAC's actor step on autograd."""
+
+    flat_actor = False
+
+
+#: SoftDENFAC's updaters (its ``updater_classes``).
+SOFT_UPDATERS = UpdaterClasses(plain=SoftAutogradUpdater, fast=SoftFastUpdater)
