@@ -1,7 +1,9 @@
-"""Tables of the DENFAC ablation (``benchmarks/ablation.py``): per (config, env) medians and quartiles over seeds.
+"""Tables of the DENFAC ablation (rows ``abl:<name>``, ``benchmarks/configs/ablation.yml``): per (config, env) medians
+and quartiles over seeds.
 
 Reads the study's runs file (``results/ablation/runs.jsonl.gz``) and writes ``runs.csv`` (one line per run) and
-``tables.md`` next to it. Usage: ``python -m benchmarks.ablation_analysis [RESULTS_DIR]``.
+``tables.md`` next to it. Usage: ``python -m benchmarks.ablation_analysis [RESULTS_DIR]``. What the study found:
+``research/ablation/``.
 """
 
 from __future__ import annotations
@@ -13,13 +15,13 @@ import numpy as np
 import pandas as pd
 
 from benchmarks import store
+from benchmarks.suites import SUITES
 from sb3_denfac.common.performance import best_so_far, fall_back_fraction
 
 RESULTS = Path(__file__).resolve().parent / "results" / "ablation"
-# the budget a config's rows are named after without "(N ep)"
-DEFAULT_EPISODES = {"pendulum": 40, "halfcheetah": 30, "cartpole": 100, "acrobot": 30, "invertedpendulum": 100}
+# the budget a config's rows are named after without "(N ep)": the suite's
+DEFAULT_EPISODES = {env: budget.episodes for env, budget in SUITES["ablation"].budgets}
 HELD_OUT = ("hopper", "reacher")  # envs not used to choose the 0.3 settings
-DEFAULT_EPISODES |= dict.fromkeys(HELD_OUT, 100)
 TWIN = "default+proximal+n_critics2"  # the library's clipped double Q (n_critics=2) on 0.3's default
 UTD = "default04+utd2.5"  # 0.4's default with update_to_data_ratio=2.5
 # return threshold per env for "episode of first return above"

@@ -1,4 +1,5 @@
-"""Analysis of a study's runs: tables (pandas), aggregates and verdicts (rliable), plots; one report per suite.
+"""Analysis of a study's runs: tables (``benchmarks.tables``), aggregates and verdicts (rliable), plots; one report per
+suite.
 
 Reads the study's compact runs file (``<results>/runs.jsonl.gz``, ``benchmarks.store``) and writes next to it:
 ``runs.csv`` (one line per run, with its measures), and for every suite of the study with finished runs
@@ -20,7 +21,18 @@ import pandas as pd
 
 from benchmarks import plots, store, verdicts
 from benchmarks import stats as st
-from benchmarks.suites import ALGOS, SUITES, Suite, estimated_cost
+from benchmarks.suites import ALGOS, SUITES, Suite
+from benchmarks.tables import (
+    BEYOND_BONUS_LEVEL,
+    answer_table,
+    beyond_survival,
+    env_order,
+    env_table,
+    markdown,
+    missing_cells,
+    row_order,
+    settings_table,
+)
 from sb3_denfac.common.performance import fall_back_fraction
 from sb3_denfac.envs.facts import env_facts
 
@@ -30,23 +42,8 @@ RUN_FIELDS = [
     "last10_beyond_survival",
     *("hyperparams_source", "commit", "device"),
 ]
-#: The rows of the user's answer (suite ``matched``): DENFAC's default (and its soft actor) against SAC at each schedule.
-ANSWER_ALGOS = ("denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min", "sac", "sac_matched", "td3_matched")
-#: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
-#: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes; its 1000 is "survives about the whole episode"
-#: (standing still for 1000 steps earns 1000 of survival bonus), so its cells also give the return beyond that bonus.
-ANSWER_LEVELS = {"halfcheetah": 1000.0, "hopper": 1000.0}
-#: The second level of an env that pays a survival bonus: one episode earning this much beyond the bonus, i.e. moving,
-#: not only standing (Hopper-v5 pays its forward velocity per step of dt = 0.008 s: 100 is about 0.8 m forward).
-BEYOND_BONUS_LEVEL = 100.0
-
-
-def beyond_survival(returns: pd.Series, lengths: pd.Series, survival_bonus: float | None) -> pd.Series:
-    """The part of each episode's return earned beyond the env's survival bonus (``EnvFacts.survival_bonus`` per
-    step): return - bonus x length; NaN where the env pays no such bonus."""
-    if survival_bonus is None:
-        return pd.Series(np.nan, index=returns.index)
-    return returns.astype(float) - survival_bonus * lengths.astype(float)
+#: The budget a run was made for (not written to ``runs.csv``): a suite counts a cell's runs of its own budget only.
+BUDGET_FIELDS = ["episodes_requested", "timesteps_requested"]
 
 
 def _learning_starts(meta: dict) -> int:
@@ -104,175 +101,15 @@ def load_records(records: Iterable[dict]) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "hyperparams_source": meta.get("hyperparams_source", ""),
                 "commit": (meta.get("git") or {}).get("commit", "")[:10],
                 "device": machine.get("gpu") or machine.get("device", "cpu"),
+                **{field: meta.get(field) for field in BUDGET_FIELDS},
             }
         )
     episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame()
-    return episodes, pd.DataFrame(run_rows, columns=RUN_FIELDS)
-
-
-def _order(algos) -> list[str]:
-    known = list(ALGOS)
-    return sorted(set(algos), key=lambda a: (known.index(a) if a in known else len(known), a))
-
-
-def _env_order(envs) -> list[str]:
-    known = list(SUITES["figure3"].envs)
-    return sorted(set(envs), key=lambda e: (known.index(e) if e in known else len(known), e))
-
-
-def _quartiles(values: pd.Series, digits: int = 1) -> str:
-    values = values.dropna()
-    if values.empty:
-        return "–"
-    q1, med, q3 = values.quantile([0.25, 0.5, 0.75])
-    return f"{med:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
+    return episodes, pd.DataFrame(run_rows, columns=RUN_FIELDS + BUDGET_FIELDS)
 
 
 def _worst(facts) -> str:
     return f"{facts.score_range[0]:g}" if facts.score_range else "the run's worst episode"
-
-
-def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
-    """One row per algorithm: runs, seeds, and median [Q1, Q3] of each measure, threshold reached, CPU cost."""
-    facts = env_facts(env)
-    rows = []
-    for algo in _order(runs.loc[runs["env"] == env, "algo"]):
-        r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
-        reached = r["episodes_to_threshold"].notna()
-        rows.append(
-            {
-                "algo": ALGOS[algo].label if algo in ALGOS else algo,
-                "runs (seeds)": f"{len(r)} ({_seed_list(r['seed'])})",
-                "best so far": _quartiles(r["final_best"]),
-                "last-10 mean": _quartiles(r["last10"]),
-                "deterministic eval (last)": _quartiles(r["final_eval"]),
-                "threshold: episodes (reached/runs)": (
-                    f"{r.loc[reached, 'episodes_to_threshold'].median():.0f} ({reached.sum()}/{len(r)})"
-                    if reached.any()
-                    else f"– (0/{len(r)})"
-                )
-                if facts.threshold is not None
-                else "",
-                "fall-back fraction": _quartiles(r["fall_back"], 2) if facts.threshold is not None else "",
-                **(
-                    {"last-10 beyond the survival bonus": _quartiles(r["last10_beyond_survival"])}
-                    if facts.survival_bonus is not None
-                    else {}
-                ),
-                "CPU s per run": _quartiles(r["cpu_time"], 0),
-                "CPU s per episode": _quartiles(r["cpu_per_episode"], 2),
-            }
-        )
-    return pd.DataFrame(rows)
-
-
-def _first_reach(episodes: pd.DataFrame, r: pd.DataFrame, column: str, level: float, lower_is_better: bool) -> str:
-    """Medians of the episodes, env steps and CPU seconds at the first episode whose cumulative best of ``column``
-    reaches ``level``, over the runs ``r`` that reached it (reached/runs)."""
-    firsts = []
-    for seed in r["seed"]:
-        e = episodes[(episodes["algo"] == r["algo"].iloc[0]) & (episodes["env"] == r["env"].iloc[0])]
-        e = e[e["seed"] == seed]
-        best = e[column].cummin() if lower_is_better else e[column].cummax()
-        reached = e[best < level] if lower_is_better else e[best >= level]
-        if len(reached):
-            firsts.append(reached.iloc[0])
-    hit = pd.DataFrame(firsts)
-    if not len(hit):
-        return f"never (0/{len(r)})"
-    return (
-        f"{hit['episode'].median():.0f} ep, {hit['timesteps'].median():.0f} steps, "
-        f"{hit['cpu_time'].median():.0f} CPU s ({len(hit)}/{len(r)})"
-    )
-
-
-def answer_table(episodes: pd.DataFrame, runs: pd.DataFrame, algos: Sequence[str] = ANSWER_ALGOS) -> pd.DataFrame:
-    """Per env, per algorithm: medians over the runs that reached :data:`ANSWER_LEVELS` (else the env's threshold) of
-    the episodes, env steps and CPU seconds to first reach it (reached/runs), and over all runs the fall-back fraction
-    after the threshold, the last-10 mean (of the exploring episodes) and the last deterministic evaluation (of the
-    final policy, ``run_one``'s ``eval_episodes``). An env that pays a survival bonus gets a second row: the first episode
-    earning :data:`BEYOND_BONUS_LEVEL` beyond it, and the last-10 mean beyond it."""
-    rows = []
-    for env in _env_order(runs["env"]):
-        facts = env_facts(env)
-        level = ANSWER_LEVELS.get(env, facts.threshold)
-        if level is None:
-            continue
-        op = "<" if facts.lower_is_better else ">="
-        row = {"env": env, "level": f"{op} {level:g}"}
-        moving = {"env": env, "level": f"beyond the survival bonus >= {BEYOND_BONUS_LEVEL:g}"}
-        if facts.survival_bonus is not None:
-            with_beyond = episodes.assign(
-                beyond=beyond_survival(episodes["return"], episodes["length"], facts.survival_bonus)
-                if {"return", "length"} <= set(episodes)
-                else np.nan
-            )
-        for algo in algos:
-            r = runs[(runs["env"] == env) & (runs["algo"] == algo)]
-            if r.empty:
-                row[ALGOS[algo].label] = moving[ALGOS[algo].label] = "–"
-                continue
-            reach = _first_reach(episodes, r, "best_so_far", level, facts.lower_is_better)
-            fall_back = f"{r['fall_back'].median():.2f}" if r["fall_back"].notna().any() else "–"
-            cell = f"{reach}; fall-back {fall_back}; last-10 {r['last10'].median():.4g}"
-            if facts.survival_bonus is not None:
-                beyond = r["last10_beyond_survival"].median()
-                cell += f" ({beyond:.4g} beyond the survival bonus)"
-                moving_reach = _first_reach(with_beyond, r, "beyond", BEYOND_BONUS_LEVEL, False)
-                moving[ALGOS[algo].label] = f"{moving_reach}; last-10 {beyond:.4g}"
-            if r["final_eval"].notna().any():
-                cell += f"; final eval {r['final_eval'].median():.4g}"
-            row[ALGOS[algo].label] = cell
-        rows.append(row)
-        if facts.survival_bonus is not None:
-            rows.append(moving)
-    return pd.DataFrame(rows)
-
-
-def _seed_list(seeds: pd.Series) -> str:
-    s = sorted(int(x) for x in seeds)
-    return f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) and len(s) > 2 else ",".join(map(str, s))
-
-
-def settings_table(runs: pd.DataFrame) -> pd.DataFrame:
-    """What each algorithm was given on each env: the YAML entry the runs were built from."""
-    table = runs.groupby(["algo", "env"])["hyperparams_source"].agg(lambda s: "; ".join(sorted(set(s)))).unstack("env")
-    table = table.reindex(index=_order(table.index), columns=_env_order(table.columns)).fillna("–")
-    table.index = [ALGOS[a].label if a in ALGOS else a for a in table.index]
-    return table.rename_axis("algo").reset_index()
-
-
-def _md(df: pd.DataFrame) -> str:
-    return df.to_markdown(index=False) if not df.empty else "(no runs)"
-
-
-def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
-    """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the CPU hours still needed: the median
-    CPU seconds of the cell's finished runs times the seeds left, or where it has none, the plan's estimate
-    (``benchmarks.cost``, full-length episodes: an upper bound where episodes end early), marked <=. A cell with
-    neither is marked "cost not measured" and counted apart in the total."""
-    done = set(zip(runs["algo"], runs["env"], runs["seed"], strict=True))
-    measured = runs.groupby(["algo", "env"])["cpu_time"].median().to_dict() if not runs.empty else {}
-    rows = {}
-    for algo in suite.algos:
-        want = suite.seeds(algo)
-        row, hours, unmeasured = {}, 0.0, 0
-        for env in suite.envs:
-            left = sum((algo, env, s) not in done for s in want)
-            row[env] = f"{len(want) - left}/{len(want)}"
-            if not left:
-                continue
-            cost = left * measured.get((algo, env), estimated_cost(algo, env)) / 3600
-            if np.isfinite(cost):
-                hours += cost
-                row[env] += f", {'' if (algo, env) in measured else '<='}{cost:.2f} h"
-            else:
-                unmeasured += 1
-                row[env] += ", cost not measured"
-        if hours or unmeasured:
-            total = f"{hours:.2f}" + (f" + {unmeasured} cells not measured" if unmeasured else "")
-            rows[ALGOS[algo].label] = {**row, "CPU hours left": total}
-    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("algo").reset_index() if rows else pd.DataFrame()
 
 
 def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, stem: str, suite: Suite | None = None) -> str:
@@ -286,7 +123,7 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
                 "Cells not complete (finished/wanted seeds, CPU hours to finish: from the cell's finished runs, "
                 "or <= the plan's full-length estimate where it has none):",
                 "",
-                _md(missing),
+                markdown(missing),
                 "",
             ]
             if not missing.empty
@@ -295,12 +132,12 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
     excluded = runs[~runs["trained"]]
     if not excluded.empty:
         lines += ["Runs left out because their model never trained (budget within the warm-up):", "",
-                  _md(excluded[["algo", "env", "seed", "timesteps", "hyperparams_source"]]), ""]  # fmt: skip
+                  markdown(excluded[["algo", "env", "seed", "timesteps", "hyperparams_source"]]), ""]  # fmt: skip
     runs = runs[runs["trained"]]
     if runs.empty:
         return "\n".join([*lines, "No finished run has trained yet.", ""])
     episodes = episodes.merge(runs[["algo", "env", "seed"]], on=["algo", "env", "seed"])
-    envs, algos = _env_order(runs["env"]), _order(runs["algo"])
+    envs, algos = env_order(runs["env"]), row_order(runs["algo"])
     commits = sorted(set(runs["commit"]))
     lines += [f"Runs: {len(runs)}; code commits: {', '.join(commits) or 'unknown'} (per run in `runs.csv`).", ""]
     on_gpu = runs[runs["device"] != "cpu"]
@@ -313,7 +150,7 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
     plots.curves(episodes, envs, algos, out / f"{stem}.png")
     plots.compute_tradeoff(episodes, envs, algos, out / f"{stem}_compute.png")
     lines += [f"![curves]({stem}.png)", "", f"![compute]({stem}_compute.png)", ""]
-    lines += ["## What each algorithm was given (YAML entry per env)", "", _md(settings_table(runs)), ""]
+    lines += ["## What each algorithm was given (YAML entry per env)", "", markdown(settings_table(runs)), ""]
     for env in envs:
         facts = env_facts(env)
         direction = "lower is better" if facts.lower_is_better else "higher is better"
@@ -328,22 +165,22 @@ def report(title: str, episodes: pd.DataFrame, runs: pd.DataFrame, out: Path, st
             lines += [f"Every step pays a survival bonus of {facts.survival_bonus:g}: standing still for the whole "
                       "episode earns its length in return. \"Beyond the survival bonus\" = return - bonus x length, the "
                       "part earned by the task itself (moving forward, less the control cost).", ""]  # fmt: skip
-        lines += [_md(env_table(runs, env)), ""]
+        lines += [markdown(env_table(runs, env)), ""]
     if suite is not None and suite.name == "matched":
         lines += ["## The user's answer: to the threshold, and after it", "",
-                  "Medians over the runs that reached the level (the env's threshold, or `analysis.ANSWER_LEVELS`) of "
+                  "Medians over the runs that reached the level (the env's threshold, or `tables.ANSWER_LEVELS`) of "
                   "the episodes, env steps and CPU seconds (cumulative, at the end of that episode) it took (reached/"
                   "runs); over all runs, the fall-back fraction after the threshold, the last-10 mean of the exploring "
                   "episodes and the final eval, the deterministic policy's return after the last episode (mean of the "
                   "suite's evaluation episodes). Where the env pays a survival bonus, also the last-10 mean beyond it, "
                   "and a second row: the first episode "
                   f"earning {BEYOND_BONUS_LEVEL:g} beyond the bonus, i.e. moving, not only standing.", "",
-                  _md(answer_table(episodes, runs)), ""]  # fmt: skip
+                  markdown(answer_table(episodes, runs)), ""]  # fmt: skip
     lines += aggregates(runs, envs, out, stem)
     if suite is None or suite.name == "figure3":
         table = verdicts.verdict_table(runs)
         if not table.empty:
-            lines += ["## Verdicts", "", verdicts.RULES, "", _md(table), ""]
+            lines += ["## Verdicts", "", verdicts.RULES, "", markdown(table), ""]
     return "\n".join(lines)
 
 
@@ -357,17 +194,17 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
         iqm = st.iqm_table(runs, envs, measure)
         if iqm.empty:
             continue
-        iqm = iqm.set_index("algo").loc[_order(iqm["algo"])].reset_index()
+        iqm = iqm.set_index("algo").loc[row_order(iqm["algo"])].reset_index()
         iqm["algo"] = [ALGOS[a].label if a in ALGOS else a for a in iqm["algo"]]
         iqm["IQM [95% CI]"] = [
             f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
         ]
-        lines += [f"IQM of the normalised {meaning}:", "", _md(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
+        lines += [f"IQM of the normalised {meaning}:", "", markdown(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
     for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min"):
         if denfac not in set(runs["algo"]):
             continue
         rows = []
-        for other in _order(runs["algo"]):
+        for other in row_order(runs["algo"]):
             if other == denfac:
                 continue
             row = {"other": ALGOS[other].label if other in ALGOS else other}
@@ -379,9 +216,9 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
                 )
             rows.append(row)
         lines += [f"Probability that {ALGOS[denfac].label} beats each algorithm, averaged over the envs both ran:", "",
-                  _md(pd.DataFrame(rows)), ""]  # fmt: skip
+                  markdown(pd.DataFrame(rows)), ""]  # fmt: skip
     values = st.normalised(runs, "final_best")
-    scores = {a: st.score_matrix(runs, a, envs, values) for a in _order(runs["algo"])}
+    scores = {a: st.score_matrix(runs, a, envs, values) for a in row_order(runs["algo"])}
     plots.performance_profile(
         scores, out / f"{stem}_profile.png", "Performance profile: normalised best-so-far at the budget", st.REPS
     )
@@ -408,7 +245,7 @@ def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str
     episodes, runs = load_records(records)
     if runs.empty:
         raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")
-    runs.to_csv(out / "runs.csv", index=False)
+    runs.to_csv(out / "runs.csv", index=False, columns=RUN_FIELDS)
     text = ""
     for suite in SUITES.values():
         if suite.study == "ablation":  # its tables: benchmarks.ablation_analysis

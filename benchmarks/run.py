@@ -6,6 +6,9 @@ and/or ``--algos/--envs/--seeds``. Each run (``benchmarks.task.run_one``) trains
 ``<results>/runs.jsonl.gz`` (``benchmarks.store``). A rerun skips the cells already there, so an interrupted sweep
 resumes where it stopped. At the end, ``benchmarks.analysis`` writes the study's tables and plots.
 
+``<results>`` is by default ``runs/<the suite's study>/`` under the current directory, a folder of your own (git
+ignores ``/runs/``): the committed studies (``benchmarks/results/<study>/``) grow only when ``--results`` names them.
+
 Examples::
 
     python -m benchmarks.run --suite figure3 --workers 0                  # the whole sweep, in this process
@@ -13,6 +16,7 @@ Examples::
     python -m benchmarks.run --algos td3 sac --envs cartpole --seeds 0 1 --episodes 50 --workers 2
     python -m benchmarks.run --suite ablation --algos abl:default abl:faithful   # part of the ablation study
     python -m benchmarks.run --suite figure3 --ray-address HOST:6379      # on a Ray cluster (pip install ray)
+    python -m benchmarks.run --suite matched --results benchmarks/results/sweep   # into the committed study
 """
 
 from __future__ import annotations
@@ -23,21 +27,24 @@ import os
 import shutil
 import signal
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from benchmarks import analysis as analysis_module
-from benchmarks import store, suites
+from benchmarks import checkpoints, executors, store, suites
 from benchmarks import task as task_module
+from benchmarks.hyperparams import load_hyperparams
 
-RESULTS_ROOT = Path(__file__).resolve().parent / "results"
+#: The committed studies (``benchmarks/results/<study>/``): written only when ``--results`` names one of them.
+COMMITTED_RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def default_results_dir(suite: str | None) -> Path:
-    """``results/<study>/``: the study of the suite (suites of one study share their runs), else ``results/sweep``."""
+    """``runs/<study>/`` under the current directory: the study of the suite (suites of one study share their runs),
+    else ``runs/sweep``. A folder of the user's own, never the committed ``benchmarks/results/<study>/``."""
     study = suites.SUITES[suite].study if suite in suites.SUITES else "sweep"
-    return RESULTS_ROOT / study
+    return Path.cwd() / "runs" / study
 
 
 def write_zoo_evaluations(record: dict[str, Any], zoo_dir: Path) -> None:
@@ -58,68 +65,6 @@ def write_zoo_evaluations(record: dict[str, Any], zoo_dir: Path) -> None:
         ep_lengths=np.array(eps["length"], dtype=np.int64)[:, None],
         best_so_far=np.array(eps["best_so_far"], dtype=np.float64)[:, None],
     )
-
-
-# ---------------------------------------------------------------------------------------------------------------- sweep
-
-
-def _init_worker() -> None:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import torch
-
-    torch.set_num_threads(1)
-
-
-def _run_local(tasks: list[dict[str, Any]], workers: int, on_result: Callable[[dict[str, Any]], None]) -> None:
-    if workers <= 0:
-        for task in tasks:
-            on_result(task_module.run_one(task))
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    # spawn: fresh interpreters (no inherited torch thread pools), same behaviour on Linux and macOS
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init_worker) as pool:
-        try:
-            futures = [pool.submit(task_module.run_one, task) for task in tasks]
-            for future in as_completed(futures):
-                on_result(future.result())
-        except BaseException:  # interrupted (Ctrl-C, SIGTERM): do not leave workers training in the background
-            for process in list(getattr(pool, "_processes", {}).values()):
-                process.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-
-
-def _run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dict[str, Any]], None]) -> None:
-    try:
-        import ray
-    except ImportError as e:
-        raise SystemExit(
-            "--ray-address needs Ray, which is not installed: pip install 'sb3-denfac[distributed]' (or pip install ray). "
-            "Every node of the cluster also needs sb3-denfac installed."
-        ) from e
-    # Ship the run's code by value so cluster nodes need only the installed package, not this checkout.
-    from benchmarks import diagnostics
-
-    for module in (task_module, diagnostics):
-        ray.cloudpickle.register_pickle_by_value(module)
-    ray.init(address=None if address == "local" else address, ignore_reinit_error=True)
-    try:
-        # A task whose worker or node dies is retried (max_retries) on the nodes left or on one that joins later.
-        remote = ray.remote(num_cpus=1, max_retries=3)(task_module.run_one)
-        task_of = {remote.remote(task): task for task in tasks}
-        pending = list(task_of)
-        while pending:  # results come back to this driver, which alone writes the runs file
-            done, pending = ray.wait(pending, num_returns=1)
-            try:
-                on_result(ray.get(done[0]))
-            except ray.exceptions.RayError as error:  # retries exhausted: recorded as failed, redone by a rerun
-                task = task_of[done[0]]
-                key = task_module.run_key(task)
-                on_result({**key, "status": "failed", "error": f"{type(error).__name__}: {error}", "log": ""})
-    finally:
-        ray.shutdown()  # disconnects from a cluster; stops a "local" one
 
 
 def select_cells(
@@ -215,7 +160,7 @@ def sweep(
             budget = suites.Budget.steps(timesteps, every, budget.eval_episodes)
         if budget.episodes < 1 and budget.timesteps is None:
             raise ValueError(f"--episodes for {env} must be >= 1, got {budget.episodes}")
-        hyperparams, source = suites.load_hyperparams(algo, env, hyperparams_dirs)
+        hyperparams, source = load_hyperparams(algo, env, hyperparams_dirs)
         task = {
             "algo": algo,
             "zoo_algo": suites.ALGOS[algo].zoo_algo,
@@ -237,7 +182,9 @@ def sweep(
         (status["skipped"] if store.cell_of(task_module.run_key(task)) in finished else tasks).append(task)
     tasks.sort(key=lambda t: (t["seed"], suites.estimated_cost(t["algo"], t["env"])))  # stable: seed by seed, cheap first
     if verbose:
-        print(f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped)", flush=True)
+        print(
+            f"{len(tasks)} runs to do, {len(status['skipped'])} already finished (skipped); results: {results_dir}", flush=True
+        )
     sweep_info = {
         "git": git,
         "machine": task_module.machine_info(device),
@@ -267,7 +214,7 @@ def sweep(
         finished.add(cell)
         status["done"].append(t)
         # the run is in the runs file: its checkpoint (if any, on this machine) is done with
-        folder = task_module.checkpoint_folder({**t, "checkpoint_dir": results_dir / "checkpoints"})
+        folder = checkpoints.checkpoint_folder({**t, "checkpoint_dir": results_dir / "checkpoints"})
         shutil.rmtree(folder, ignore_errors=True)
         if zoo_logs is not None:
             write_zoo_evaluations(record, Path(zoo_logs))
@@ -286,9 +233,9 @@ def sweep(
 
     if tasks:
         if ray_address:
-            _run_ray(tasks, ray_address, on_result)
+            executors.run_ray(tasks, ray_address, on_result)
         else:
-            _run_local(tasks, workers, on_result)
+            executors.run_local(tasks, workers, on_result)
     if analysis and (status["done"] or status["skipped"]):
         report = analysis_module.analyse(results_dir)
         if verbose:
@@ -343,7 +290,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--suite", default=None, help=f"one of {list(suites.SUITES)}")
     rows = [a for a, row in suites.ALGOS.items() if row.family != "ablation"]
-    parser.add_argument("--algos", nargs="+", default=None, help=f"rows: {rows}, or abl:<config> (benchmarks/ablation.py)")
+    parser.add_argument(
+        "--algos", nargs="+", default=None, help=f"rows: {rows}, or abl:<config> (benchmarks/configs/ablation.yml)"
+    )
     parser.add_argument("--envs", nargs="+", default=None, help=f"short names {suites.ENVS} or any Gymnasium id")
     parser.add_argument("--seeds", nargs="+", type=int, default=None)
     parser.add_argument(
@@ -352,7 +301,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--timesteps", type=int, default=None, help="a budget of N env steps for every env instead of episodes"
     )
-    parser.add_argument("--results", default=None, help="results folder (default: results/<the suite's study>)")
+    parser.add_argument(
+        "--results",
+        default=None,
+        help="results folder (default: runs/<the suite's study>/ here; the committed ones: benchmarks/results/<study>)",
+    )
     parser.add_argument("--hyperparams", nargs="*", default=[], help="folders searched first for <algo>.yml")
     parser.add_argument("--workers", type=int, default=1, help="process pool size (0: in this process)")
     parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001', 'local')")

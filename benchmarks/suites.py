@@ -1,30 +1,36 @@
-"""What the benchmark runs: algorithms, per-env budgets, suites, and the hyperparameters of each run.
+"""What the benchmark runs: algorithms (rows), per-env budgets and suites.
 
 An *algorithm* here is a benchmark row: a zoo algorithm plus a YAML file (``denfac`` and ``denfac_default`` are the
 same class with different files). A *suite* is a set of (algorithm, env, seed) cells; suites share their runs, so a
-cell that two suites contain is trained once.
+cell that two suites contain is trained once. The hyperparameters of a row on an env: ``benchmarks.hyperparams``.
+
+The ablation's rows (``abl:<name>``) and its suite are data, ``configs/ablation.yml``: this module reads their names and
+budgets, ``benchmarks.hyperparams`` their settings (through ``benchmarks.rows``).
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sb3_denfac.envs.facts import env_facts
+import yaml
+
+from benchmarks import rows as row_files
 
 _HERE = Path(__file__).resolve().parent
 PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
 BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
+ABLATION_ROWS = BENCHMARK_CONFIGS_DIR / "ablation.yml"  # the ablation's rows and suite, as data
 SWEEP_PLAN = _HERE / "results" / "cost" / "sweep_plan.csv"  # estimated CPU seconds per run, written by benchmarks.cost
 
 
 @dataclass(frozen=True)
 class Algo:
     """A benchmark row: ``zoo_algo`` with the settings of ``<name>.yml`` (the zoo's lookup), or of another row
-    (``base``) with ``overrides`` on top, or of a Python ``config(env)`` (the ablation's); ``label`` for tables."""
+    (``base``) with ``overrides`` on top, or of the row ``row`` of the row file ``rows_file`` (the ablation's,
+    :mod:`benchmarks.rows`); ``label`` for tables. ``benchmarks.hyperparams.load_hyperparams`` resolves them."""
 
     name: str
     zoo_algo: str
@@ -32,20 +38,12 @@ class Algo:
     family: str  # "paper" (the paper's Figure 3 algorithms), "peer" (what users pick today), "ablation"
     base: str | None = None
     overrides: tuple[tuple[str, Any], ...] = ()
-    config: Callable[[str], dict[str, Any]] | None = None
+    rows_file: Path | None = None
+    row: str | None = None
 
 
-def denfac_critic_steps_per_episode() -> int:
-    """Critic gradient steps the default DENFAC takes at every episode end: K fitted iterations x critic steps."""
-    import inspect
-
-    from sb3_denfac import DENFAC
-
-    params = inspect.signature(DENFAC.__init__).parameters
-    return int(params["n_fitted_iterations"].default) * int(params["critic_steps"].default)
-
-
-#: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC.
+#: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC
+#: (``"denfac"``: ``benchmarks.hyperparams.denfac_critic_steps_per_episode``).
 MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
 #: A high update-to-data ratio, as DroQ and REDQ use (20 gradient steps per environment step).
 HIGH_UTD = (("train_freq", 1), ("gradient_steps", 20))
@@ -65,21 +63,22 @@ ALGOS: dict[str, Algo] = {
             base="denfac_default",
             overrides=(("critic_target", "min"), ("target_policy_noise", 0.0)),
         ),  # fmt: skip
-        # DENFAC's soft actor option (ent_coef): SAC's squashed Gaussian actor and soft targets inside the fitted
-        # iterations, with the targets' bootstrap value bounded (bootstrap_bounds; ablation README, section 23)
+        # The soft actor (SoftDENFAC, zoo name soft_denfac; the 0.5 development builds' DENFAC(ent_coef="auto")): SAC's
+        # squashed Gaussian actor and soft targets inside the fitted iterations, with the targets' bootstrap value
+        # bounded (bootstrap_bounds; research/ablation/journal.md, 23-24)
         Algo(
             "denfac_soft",
-            "denfac",
+            "soft_denfac",
             "DENFAC, soft actor",
             "paper",
             base="denfac_default",
             overrides=(("ent_coef", "auto"), ("bootstrap_bounds", True)),
         ),  # fmt: skip
         # the soft actor with the critics' minimum in its targets and 20 fitted iterations of 25 critic and 12 actor
-        # steps (the same steps per episode, targets refreshed twice as often; ablation README, section 25)
+        # steps (the same steps per episode, targets refreshed twice as often; research/ablation/journal.md, 25)
         Algo(
             "denfac_soft_min",
-            "denfac",
+            "soft_denfac",
             "DENFAC, soft actor, min targets, K = 20",
             "paper",
             base="denfac_soft",
@@ -300,75 +299,6 @@ def budget(env: str, episodes: int | None = None, suite: Suite | None = None) ->
     return base if episodes is None else Budget(episodes, base.eval_every, base.eval_episodes, base.eval_kwargs)
 
 
-def _paper_denfac() -> dict[str, Any]:
-    from sb3_denfac.denfac.presets import paper
-
-    return paper()
-
-
-#: Rows whose package YAML states the paper's settings only for the paper's envs (its ``default`` entry is the
-#: library's general default): on any other env they use this preset, so "DENFAC (faithful)" stays Algorithm 1.
-PRESET_ELSEWHERE: dict[str, Any] = {"denfac": _paper_denfac}  # the one preset: presets.PAPER
-
-
-def _takes_gamma(algo: str) -> bool:
-    import inspect
-
-    from sb3_denfac.zoo import algorithm_class
-
-    zoo_algo = ALGOS[algo].zoo_algo if algo in ALGOS else algo
-    return "gamma" in inspect.signature(algorithm_class(zoo_algo).__init__).parameters
-
-
-def load_hyperparams(algo: str, env: str, dirs: Iterable[str | Path] = ()) -> tuple[dict[str, Any], str]:
-    """The hyperparameters of row ``algo`` on ``env`` and where they come from: (hyperparameters, source).
-
-    - A row with ``config`` (the ablation's) takes ``config(env)``.
-    - A row with a ``base`` row takes that row's hyperparameters with its ``overrides`` on top (``gradient_steps``
-      ``"denfac"``: :func:`denfac_critic_steps_per_episode`).
-    - Any other row: zoo-style lookup of ``<algo>.yml`` in ``dirs``, then the package's folder, then
-      ``benchmarks/configs``: the entry of the env's Gymnasium id (of its base env for a variant, ``HYPERPARAMS_OF``),
-      else ``default``. Fails if no file or entry exists: every row states its settings.
-
-    The env's prescribed gamma (``ENV_FACTS``) is added when the result sets none and the algorithm has one."""
-    row = ALGOS.get(algo)
-    if row is not None and row.config is not None:
-        hyperparams, source = {"policy": "MlpPolicy", **row.config(env)}, f"benchmarks.ablation.CONFIGS[{algo[4:]!r}]"
-    elif row is not None and row.base is not None:
-        hyperparams, source = load_hyperparams(row.base, env, dirs)
-        overrides = {k: (denfac_critic_steps_per_episode() if v == "denfac" else v) for k, v in row.overrides}
-        hyperparams = {**hyperparams, **overrides}
-        source += " + " + ", ".join(f"{k}={v}" for k, v in overrides.items())
-        return hyperparams, source
-    else:
-        hyperparams, source = _yaml_hyperparams(algo, env, dirs)
-    env_fact = env_facts(env)
-    if "gamma" not in hyperparams and env_fact.gamma is not None and _takes_gamma(algo):
-        hyperparams["gamma"] = env_fact.gamma
-        source += f" + the env's gamma {env_fact.gamma}"
-    return hyperparams, source
-
-
-def _yaml_hyperparams(algo: str, env: str, dirs: Iterable[str | Path]) -> tuple[dict[str, Any], str]:
-    from sb3_denfac.zoo import load_config_file, select_entry
-
-    dirs = list(dirs)
-    entry_id = env_facts(HYPERPARAMS_OF.get(env, env)).gym_id
-    for folder in [*map(Path, dirs), PACKAGE_HYPERPARAMS_DIR, BENCHMARK_CONFIGS_DIR]:
-        path = folder / f"{algo}.yml"
-        if path.is_file():
-            break
-    else:
-        raise FileNotFoundError(
-            f"no {algo}.yml in {[str(d) for d in dirs]}, {PACKAGE_HYPERPARAMS_DIR} or {BENCHMARK_CONFIGS_DIR}"
-        )
-    config = load_config_file(path)
-    if algo in PRESET_ELSEWHERE and entry_id not in config:
-        return {"policy": "MlpPolicy", **PRESET_ELSEWHERE[algo]()}, f"sb3_denfac.denfac.presets.PAPER (no {path.name} entry)"
-    key = entry_id if entry_id in config else "default"
-    return select_entry(config, entry_id, path), f"{path.name}[{key}]"
-
-
 @functools.cache
 def _cost_table() -> dict[tuple[str, str], float]:
     import csv
@@ -384,23 +314,29 @@ def estimated_cost(algo: str, env: str) -> float:
     return _cost_table().get((algo, env), float("nan"))
 
 
-def _register_ablation() -> None:
-    """The ablation's configurations as rows ``abl:<config>`` and its suite (study ``ablation``)."""
-    from benchmarks import ablation
-
-    for name in ablation.CONFIGS:
-        row = f"abl:{name}"
-        ALGOS[row] = Algo(row, "denfac", name, "ablation", config=functools.partial(ablation.hyperparams, name))
-    SUITES["ablation"] = Suite(
+def _ablation() -> tuple[dict[str, Algo], Suite]:
+    """The ablation's rows ``abl:<name>`` and its suite (study ``ablation``), as ``configs/ablation.yml`` states them."""
+    content = yaml.safe_load(ABLATION_ROWS.read_text())
+    study = content["suite"]
+    rows = {
+        f"abl:{name}": Algo(
+            f"abl:{name}", row_files.algorithm(content["rows"], name), name, "ablation", rows_file=ABLATION_ROWS, row=name
+        )
+        for name in content["rows"]
+    }
+    budgets = tuple((env, Budget(**budget)) for env, budget in study["budgets"].items())
+    suite = Suite(
         "ablation",
-        tuple(ablation.BUDGETS),
-        ((tuple(f"abl:{name}" for name in ablation.CONFIGS), _THREE),),
-        "DENFAC configurations one factor apart (benchmarks/ablation.py), with critic-fit diagnostics; select "
-        "configurations with --algos",
+        tuple(env for env, _ in budgets),
+        ((tuple(rows), tuple(study["seeds"])),),
+        " ".join(study["description"].split()),
         study="ablation",
-        budgets=tuple(ablation.BUDGETS.items()),
-        diagnostics_every=5,
+        budgets=budgets,
+        diagnostics_every=study["diagnostics_every"],
     )
+    return rows, suite
 
 
-_register_ablation()
+ABLATION_ALGOS, _ABLATION_SUITE = _ablation()
+ALGOS.update(ABLATION_ALGOS)
+SUITES[_ABLATION_SUITE.name] = _ABLATION_SUITE

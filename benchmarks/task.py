@@ -6,8 +6,9 @@ count; plus (:class:`RunClock`) the run's CPU seconds so far. Every ``eval_every
 policy that played the episode is evaluated deterministically on a separate env for ``eval_episodes`` episodes; the
 evaluation's own CPU time is left out of the run's CPU seconds.
 
-With ``BENCHMARK_PROGRESS_DIR`` set, each run also rewrites ``<algo>_<env>_<seed>.json`` there at every episode end
-(episodes, steps, CPU and wall seconds so far): how far a run got when a lease or a session ends before it does.
+A run saves checkpoints from which a rerun resumes it (``benchmarks.checkpoints``). With ``BENCHMARK_PROGRESS_DIR``
+set, each run also rewrites ``<algo>_<env>_<seed>.json`` there at every episode end (episodes, steps, CPU and wall
+seconds so far): how far a run got when a lease or a session ends before it does.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import io
 import json
 import os
 import platform
-import shutil
 import subprocess
 import time
 import traceback
@@ -27,6 +27,7 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+from benchmarks.checkpoints import RunCheckpoint, checkpoint_folder, replace_file, restore_callbacks, resume_or_start
 from benchmarks.diagnostics import Diagnostics
 
 _REPO = Path(__file__).resolve().parent.parent
@@ -117,13 +118,6 @@ class RunClock(BaseCallback):
         scores = evaluate(self.model, self.eval_env, self.eval_episodes)
         self.eval_cpu_time += time.process_time() - before
         self.evaluations.append({"episode": len(self.cpu_times), "timesteps": int(self.model.num_timesteps), "scores": scores})
-
-
-def replace_file(path: Path, data: bytes) -> None:
-    """Write ``data`` aside, then rename it over ``path``: a reader or a kill never sees half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
 
 
 def git_state() -> dict[str, Any]:
@@ -219,137 +213,12 @@ class DiagnosticsCallback(BaseCallback):
         self._last = episode
 
 
-class RunCheckpoint(BaseCallback):
-    """Save the run so far into ``folder`` at the first point after an episode's update once ``every`` seconds (wall)
-    have passed since the last save, so that a run killed with its sweep resumes there (:func:`load_checkpoint`).
-
-    A checkpoint is SB3's own files (``model.save``, ``save_replay_buffer``, ``VecNormalize.save``) and ``state.pkl``,
-    the run's records so far (``state()``). Each save writes new files, then replaces ``state.pkl`` (which names them),
-    then removes the old ones: a kill at any point leaves the previous checkpoint or the new one whole."""
-
-    def __init__(self, folder: Path, every: float, state: Any, clock: RunClock | None = None) -> None:
-        super().__init__()
-        self.folder, self.every, self.state, self.clock = Path(folder), every, state, clock
-        self._last, self._episode_ended, self.saves = time.perf_counter(), False, 0
-
-    def _on_step(self) -> bool:
-        # the rollout's last step ended an episode (a rollout that stops mid-episode, CACLA's n_steps, is no point to
-        # resume from: the env restarts on a resume)
-        self._episode_ended = bool(all(self.locals["dones"]))
-        return True
-
-    def _on_rollout_start(self) -> None:  # after the update that followed the last rollout
-        if self._episode_ended and time.perf_counter() - self._last >= self.every:
-            before = time.process_time()
-            try:
-                self.save()
-            except Exception as error:  # noqa: BLE001  (a run that cannot be saved still trains; it is redone if killed)
-                print(f"checkpoints off for this run: {type(error).__name__}: {error}")
-                self.every = float("inf")
-            if self.clock is not None:  # not training: left out of the run's CPU seconds, as evaluations are
-                self.clock.checkpoint_cpu_time += time.process_time() - before
-        self._episode_ended = False
-
-    def save(self) -> None:
-        import pickle
-
-        from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-
-        self.folder.mkdir(parents=True, exist_ok=True)
-        tag = f"{self.model.num_timesteps}"
-        files = {"model": f"model_{tag}.zip"}
-        self.model.save(self.folder / files["model"])
-        if isinstance(self.model, OffPolicyAlgorithm):
-            files["replay_buffer"] = f"replay_buffer_{tag}.pkl"
-            self.model.save_replay_buffer(self.folder / files["replay_buffer"])
-        if self.model.get_vec_normalize_env() is not None:
-            files["vec_normalize"] = f"vec_normalize_{tag}.pkl"
-            self.model.get_vec_normalize_env().save(str(self.folder / files["vec_normalize"]))
-        replace_file(self.folder / "state.pkl", pickle.dumps({**self.state(), "files": files}))
-        for path in self.folder.iterdir():  # the last checkpoint's, and any left by a save a kill cut short
-            if path.name != "state.pkl" and path.name not in files.values():
-                path.unlink(missing_ok=True)
-        self._last, self.saves = time.perf_counter(), self.saves + 1
-
-
-def load_checkpoint(folder: Path | None) -> dict[str, Any] | None:
-    """The state a :class:`RunCheckpoint` saved in ``folder`` (None: no checkpoint there)."""
-    import pickle
-
-    path = None if folder is None else Path(folder) / "state.pkl"
-    return pickle.loads(path.read_bytes()) if path is not None and path.exists() else None
-
-
-def checkpoint_folder(task: dict[str, Any]) -> Path | None:
-    """Where the run of ``task`` keeps its checkpoint: one folder per cell under ``task["checkpoint_dir"]``."""
-    if not task.get("checkpoint_dir"):
-        return None
-    budget = f"{task['timesteps']}steps" if task.get("timesteps") else task["episodes"]
-    return Path(task["checkpoint_dir"]) / f"{task['algo'].replace(':', '-')}_{task['env']}_{task['seed']}_{budget}"
-
-
 def columns(records: list[dict[str, Any]]) -> dict[str, list[Any]]:
     """Per-episode records -> per-field columns (the store's compact form)."""
     return {field: [r.get(field) for r in records] for field in EPISODE_FIELDS}
 
 
 EPISODE_FIELDS = ("episode", "performance", "best_so_far", "return", "length", "timesteps", "wall_time", "cpu_time")
-
-
-def resume_model(model: Any, folder: Path, saved: dict[str, Any], device: str) -> Any:
-    """The checkpoint's model on the env ``model`` was built with (the same zoo wrappers), its replay buffer and
-    normalisation statistics loaded; its next episode starts from a reset (the saved run stopped at an episode end)."""
-    env = model.get_env()
-    files = saved["files"]
-    if "vec_normalize" in files:
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        env = VecNormalize.load(str(folder / files["vec_normalize"]), model.get_vec_normalize_env().venv)
-    resumed = type(model).load(folder / files["model"], env=env, device=device)
-    if "replay_buffer" in files:
-        resumed.load_replay_buffer(folder / files["replay_buffer"])
-    # load() seeded everything with the run's seed again: the next episodes would replay the first ones' start states
-    # and noise. Each resume gets its own streams instead (not an uninterrupted run's, which are not saved).
-    if resumed.seed is not None:
-        resumed.set_random_seed(resumed.seed + 1_000_003 * (len(saved.get("resumed", [])) + 1))
-    resumed._last_obs = None  # learn() resets the env
-    return resumed
-
-
-def restore_callbacks(saved: dict[str, Any], performance: Any, clock: RunClock, steps: Any, diagnostics: Any) -> dict:
-    """Put a checkpoint's records back into the run's callbacks; return what the earlier processes spent."""
-    performance.records = list(saved["records"])
-    performance._start_time = time.perf_counter() - saved["episodes_wall"]  # the episodes' wall times count on
-    clock.cpu_times, clock.evaluations = list(saved["cpu_times"]), list(saved["evaluations"])
-    clock.offset = saved["clock_cpu"]  # its training CPU up to the checkpoint, the update after its last episode too
-    clock.wall_offset = saved["episodes_wall"]
-    steps.denfac_steps, steps._seen_updates = saved["denfac_steps"]
-    if diagnostics is not None and saved["diagnostics"] is not None:
-        diagnostics.diagnostics.rows = list(saved["diagnostics"])
-        diagnostics._last = len(saved["records"])
-    last = saved["records"][-1]
-    resumed = [*saved["resumed"], {"episodes": len(saved["records"]), "timesteps": last["timesteps"], **saved["where"]}]
-    return {**{k: saved[k] for k in ("cpu_time", "wall_time", "eval_cpu_time", "git")}, "resumed": resumed}
-
-
-def resume_or_start(model: Any, folder: Path | None, settings: dict[str, str], device: str) -> tuple[Any, dict | None]:
-    """``model`` resumed from the checkpoint in ``folder`` and its saved state, or ``(model, None)``: no checkpoint, or
-    one that was made with other settings or on another device, or that cannot be read (the run starts afresh, its
-    log says why, and the stale checkpoint is removed)."""
-    try:
-        saved = load_checkpoint(folder)
-        if saved is None:
-            return model, None
-        made_on = saved.get("where", {}).get("device")
-        if (saved.get("hyperparams"), made_on) != (settings, device):
-            reason = f"it was made with other settings or on another device ({made_on})"
-        else:
-            return resume_model(model, folder, saved, device), saved
-    except Exception as error:  # noqa: BLE001  (a truncated file, a library that changed)
-        reason = f"it cannot be loaded: {type(error).__name__}: {error}"
-    print(f"checkpoint in {folder} ignored, the run starts afresh: {reason}")
-    shutil.rmtree(folder, ignore_errors=True)
-    return model, None
 
 
 def run_key(task: dict[str, Any]) -> dict[str, Any]:

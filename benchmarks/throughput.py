@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import suites
+from benchmarks.hyperparams import load_hyperparams
 from benchmarks.task import git_state, machine_info
 
 _BARRIER: Any = None
@@ -40,7 +41,7 @@ def worker(algo: str, env: str, device: str, seconds: float, seed: int) -> dict[
     from sb3_denfac.zoo import make_model
 
     torch.set_num_threads(1)
-    hyperparams, _ = suites.load_hyperparams(algo, env)
+    hyperparams, _ = load_hyperparams(algo, env)
     model = make_model(suites.ALGOS[algo].zoo_algo, env_facts(env).gym_id, hyperparams, seed=seed, device=device)
     warm_up = int(getattr(model, "learning_starts", 0)) + 1
 

@@ -29,18 +29,33 @@ _LAZY: dict[str, str] = {
     "NFAC": "sb3_denfac.nfac",
     "SoftDENFAC": "sb3_denfac.soft_denfac",
     "EpisodePerformanceCallback": "sb3_denfac.common.callbacks",
+    "UpdateStatsCallback": "sb3_denfac.common.callbacks",
 }
+#: Public modules imported on first access: ``from sb3_denfac import presets`` (DENFAC's PAPER, DATA_EFFICIENT...).
+_LAZY_MODULES: dict[str, str] = {"presets": "sb3_denfac.denfac.presets"}
 
-__all__ = ["CACLA", "CMAES", "DDPG", "DENFAC", "NFAC", "SoftDENFAC", "EpisodePerformanceCallback", "register_envs"]
+__all__ = [
+    "CACLA",
+    "CMAES",
+    "DDPG",
+    "DENFAC",
+    "NFAC",
+    "SoftDENFAC",
+    "EpisodePerformanceCallback",
+    "UpdateStatsCallback",
+    "presets",
+    "register_envs",
+]
 
 
 def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
+    if name in _LAZY or name in _LAZY_MODULES:
+        module = importlib.import_module(_LAZY.get(name) or _LAZY_MODULES[name])
+        value = module if name in _LAZY_MODULES else getattr(module, name)
         globals()[name] = value  # later accesses skip this function
         return value
     raise AttributeError(f"module 'sb3_denfac' has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_LAZY})
+    return sorted({*globals(), *_LAZY, *_LAZY_MODULES})

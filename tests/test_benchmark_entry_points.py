@@ -158,9 +158,9 @@ def test_acrobot_horizon(tmp_path):
 
 
 def test_long_hopper_record_script():
-    """``benchmarks/results/ablation/long_hopper/run.py`` (section 17's longer Hopper runs) prints its per-10-episode
+    """``research/ablation/long_hopper/run.py`` (the journal's section 17: longer Hopper runs) prints its per-10-episode
     rows; with ``--bounds`` the q targets stay within what the rewards allow (|q| < 1000 on Hopper's rewards)."""
-    script = REPO / "benchmarks/results/ablation/long_hopper/run.py"
+    script = REPO / "research/ablation/long_hopper/run.py"
     result = subprocess.run(
         [sys.executable, str(script), "0", "10", "--bounds"], cwd=REPO, capture_output=True, text=True, timeout=300
     )
@@ -171,9 +171,9 @@ def test_long_hopper_record_script():
 
 
 def test_default_choice_record_script(monkeypatch, capsys):
-    """``benchmarks/results/ablation/default_choice.py`` (section 27) reads the committed runs of every compared row on
-    every env and seed (one run per cell) and prints a probability of improvement per candidate and measure."""
-    from benchmarks.results.ablation import default_choice
+    """``research/ablation/default_choice.py`` (the journal's section 27) reads the committed runs of every compared row
+    on every env and seed (one run per cell) and prints a probability of improvement per candidate and measure."""
+    from research.ablation import default_choice
 
     monkeypatch.setattr(stats, "REPS", 50)
     runs = default_choice.load_runs()
@@ -182,6 +182,41 @@ def test_default_choice_record_script(monkeypatch, capsys):
     default_choice.main()
     out = capsys.readouterr().out
     assert out.count("(5 vs 5)") == 2 * 4 * len(default_choice.MEASURES) and "–" not in out
+
+
+@pytest.mark.parametrize("module", ["benchmarks.rows", "benchmarks.suites", "benchmarks.hyperparams", "benchmarks.run"])
+def test_benchmark_modules_import_first_in_a_fresh_interpreter(module):
+    """No import circle: each module imports on its own (the ablation's rows are data that ``suites`` reads)."""
+    result = subprocess.run([sys.executable, "-c", f"import {module}"], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+
+
+def test_research_code_assigns_no_library_attribute():
+    """Studies use the library's public API: no module of ``research/`` assigns to an attribute of something it imported
+    from ``sb3_denfac``, Stable-Baselines3 or ``benchmarks`` (the prototypes that did are removed: research/ablation)."""
+    import ast
+
+    libraries = ("sb3_denfac", "stable_baselines3", "sb3_contrib", "benchmarks")
+    found = []
+    for path in sorted((REPO / "research").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                imported |= {(a.asname or a.name).split(".")[0] for a in node.names if a.name.startswith(libraries)}
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith(libraries):
+                imported |= {a.asname or a.name for a in node.names}
+        for node in ast.walk(tree):
+            targets = node.targets if isinstance(node, ast.Assign) else [getattr(node, "target", None)]
+            for target in targets if isinstance(node, ast.Assign | ast.AugAssign | ast.AnnAssign) else []:
+                while isinstance(target, ast.Attribute):
+                    target = target.value
+                    if isinstance(target, ast.Name) and target.id in imported:
+                        found.append(f"{path.relative_to(REPO)}:{node.lineno}")
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "setattr":
+                if isinstance(node.args[0], ast.Name) and node.args[0].id in imported:
+                    found.append(f"{path.relative_to(REPO)}:{node.lineno}")
+    assert not found, found
 
 
 @pytest.mark.parametrize(

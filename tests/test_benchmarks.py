@@ -21,6 +21,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from benchmarks import run as runner
 from benchmarks import stats as st
 from benchmarks import store, suites, verdicts
+from benchmarks.hyperparams import denfac_critic_steps_per_episode, load_hyperparams
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback
 from sb3_denfac.envs.facts import env_facts
 
@@ -132,13 +133,16 @@ def test_suites_and_cells():
         runner.select_cells("diagnosis", seeds=[3])
     diagnosis = runner.select_cells("diagnosis")  # both ways: SAC's ingredients into DENFAC, DENFAC's into SAC
     assert len(diagnosis) == 8 * 4 * 3 and {"abl:default05", "sac_matched_frozen"} <= {a for a, _, _ in diagnosis}
-    frozen = suites.load_hyperparams("sac_matched_frozen", "hopper")[0]
+    frozen = load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
     matched = runner.select_cells("matched")
     assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 8 * 7 * 5
     ablation = suites.SUITES["ablation"]
     assert ablation.study == "ablation" and ablation.diagnostics_every > 0
-    assert runner.default_results_dir("ablation").name == "ablation" and runner.default_results_dir(None).name == "sweep"
+    # a user's runs go to runs/<study>/ under the current directory, never into the committed benchmarks/results/
+    assert runner.default_results_dir("ablation") == Path.cwd() / "runs" / "ablation"
+    assert runner.default_results_dir(None) == Path.cwd() / "runs" / "sweep"
+    assert runner.COMMITTED_RESULTS not in runner.default_results_dir("matched").parents
     assert "abl:faithful" in ablation.algos and not any("proto" in a for a in ablation.algos)
     assert suites.budget("halfcheetah", None, ablation).episodes == 30 and suites.budget("halfcheetah").episodes == 100
     assert runner.parse_episodes(["60", "halfcheetah=20"])["halfcheetah"] == 20
@@ -147,37 +151,90 @@ def test_suites_and_cells():
 
 def test_hyperparams_lookup(tmp_path):
     (tmp_path / "td3.yml").write_text("sb3_denfac/ContinuousCartPole-v0:\n  learning_starts: 7\ndefault:\n  tau: 0.5\n")
-    assert suites.load_hyperparams("td3", "cartpole", [tmp_path])[0] == {"learning_starts": 7, "gamma": 0.99}
-    params, source = suites.load_hyperparams("td3", "acrobot", [tmp_path])
+    assert load_hyperparams("td3", "cartpole", [tmp_path])[0] == {"learning_starts": 7, "gamma": 0.99}
+    params, source = load_hyperparams("td3", "acrobot", [tmp_path])
     assert params == {"tau": 0.5, "gamma": 0.9} and source == "td3.yml[default] + the env's gamma 0.9"
-    assert suites.load_hyperparams("td3", "pendulum", [tmp_path])[0] == {"tau": 0.5}  # Pendulum prescribes no gamma
+    assert load_hyperparams("td3", "pendulum", [tmp_path])[0] == {"tau": 0.5}  # Pendulum prescribes no gamma
     # DENFAC (default): the library's defaults, plus only the env's prescribed gamma
-    assert suites.load_hyperparams("denfac_default", "acrobot")[0] == {"policy": "MlpPolicy", "gamma": 0.9}
-    assert suites.load_hyperparams("denfac_default", "invertedpendulum")[0] == {"policy": "MlpPolicy"}
+    assert load_hyperparams("denfac_default", "acrobot")[0] == {"policy": "MlpPolicy", "gamma": 0.9}
+    assert load_hyperparams("denfac_default", "invertedpendulum")[0] == {"policy": "MlpPolicy"}
     # the Acrobot variant takes the Acrobot entries (the paper's Figure 5 settings)
-    assert suites.load_hyperparams("denfac", "acrobot75")[0] == suites.load_hyperparams("denfac", "acrobot")[0]
+    assert load_hyperparams("denfac", "acrobot75")[0] == load_hyperparams("denfac", "acrobot")[0]
     with pytest.raises(FileNotFoundError):
-        suites.load_hyperparams("nope", "cartpole")
+        load_hyperparams("nope", "cartpole")
 
 
 def test_ablation_configurations_take_the_papers_settings_from_one_place():
     """The faithful ablation rows are presets.PAPER plus the env's Figure 5 values of hyperparams/denfac.yml."""
-    from benchmarks import ablation
-    from sb3_denfac.denfac.presets import PAPER
+    from sb3_denfac.denfac.presets import PAPER, paper
 
-    yaml = suites.load_hyperparams("denfac", "acrobot")[0]
-    faithful = suites.load_hyperparams("abl:faithful", "acrobot")[0]
+    yaml = load_hyperparams("denfac", "acrobot")[0]
+    yaml_cartpole = load_hyperparams("denfac", "cartpole")[0]
+    faithful = load_hyperparams("abl:faithful", "acrobot")[0]
     for key in ("buffer_size", "reset_critic", "inverting_gradients", "gamma"):
         assert faithful[key] == yaml[key], key
     assert faithful["policy_kwargs"]["net_arch"] == yaml["policy_kwargs"]["net_arch"]
     assert faithful["learning_rate"] == PAPER["learning_rate"] and faithful["weighting"] == "retrace"
-    on_pendulum = suites.load_hyperparams("abl:faithful", "pendulum")[0]
-    assert on_pendulum == {"policy": "MlpPolicy", **ablation.FAITHFUL} and on_pendulum["buffer_size"] == 6000
+    on_pendulum = load_hyperparams("abl:faithful", "pendulum")[0]
+    assert on_pendulum == {"policy": "MlpPolicy", **paper(buffer_size=6000)} and on_pendulum["buffer_size"] == 6000
     # a factor moved away from the paper is not put back by the env's values
-    assert suites.load_hyperparams("abl:faithful+nets", "acrobot")[0]["policy_kwargs"]["net_arch"] == {
+    assert load_hyperparams("abl:faithful+nets", "acrobot")[0]["policy_kwargs"]["net_arch"] == {
         "pi": [64, 64], "qf": [64, 64]
     }  # fmt: skip
-    assert suites.load_hyperparams("abl:good+vecnorm", "pendulum")[0]["normalize"] is True
+    assert load_hyperparams("abl:faithful+D", "acrobot")[0]["buffer_size"] == 100_000
+    assert load_hyperparams("abl:faithful+lr", "cartpole")[0]["buffer_size"] == yaml_cartpole["buffer_size"] == 3000
+    assert load_hyperparams("abl:good+vecnorm", "pendulum")[0]["normalize"] is True
+
+
+def test_row_files_resolve_bases_and_presets(tmp_path):
+    """A row file's rows start from their ``base`` row or ``preset``, their own keys merged over it (policy_kwargs and
+    net_arch key by key); a missing base or a loop of bases is named."""
+    from benchmarks.rows import chain, load_rows, read_rows, resolve
+    from sb3_denfac.denfac.presets import PAPER, with_overrides
+
+    path = tmp_path / "rows.yml"
+    path.write_text(
+        "rows:\n"
+        "  paper: {preset: paper, buffer_size: 6000}\n"
+        "  wide: {base: paper, policy_kwargs: {net_arch: {pi: [64]}}, adam_betas: [0.9, 0.999]}\n"
+        "  plain: {learning_rate: 0.001}\n"
+        "  orphan: {base: nope}\n"
+        "  loop: {base: loop2}\n"
+        "  loop2: {base: loop}\n"
+    )
+    rows = read_rows(path, "rows")
+    assert chain(rows, "wide") == ["wide", "paper"] and resolve(rows, "plain") == {"learning_rate": 0.001}
+    wide = resolve(rows, "wide")
+    assert wide == with_overrides(
+        PAPER, {"buffer_size": 6000, "policy_kwargs": {"net_arch": {"pi": [64]}}, "adam_betas": [0.9, 0.999]}
+    )
+    assert wide["policy_kwargs"]["net_arch"]["qf"] == PAPER["policy_kwargs"]["net_arch"]["qf"]  # merged, not replaced
+    with pytest.raises(KeyError, match="row 'nope' is not defined"):
+        resolve(rows, "orphan")
+    with pytest.raises(ValueError, match="based on each other"):
+        resolve(rows, "loop")
+    path.write_text("a: {gamma: 0.9}\nb: {base: a, sigma: 0.2}\n")  # a file of rows alone (research/mujoco100k/rows.yml)
+    assert load_rows(path) == {"a": {"gamma": 0.9}, "b": {"gamma": 0.9, "sigma": 0.2}}
+
+
+def test_ablation_rows_are_the_yaml_rows():
+    """The suite ``ablation`` is configs/ablation.yml: its rows in the file's order, its budgets and seeds."""
+    import yaml
+
+    content = yaml.safe_load(suites.ABLATION_ROWS.read_text())
+    ablation = suites.SUITES["ablation"]
+    assert ablation.algos == [f"abl:{name}" for name in content["rows"]] and len(ablation.algos) == 79
+    assert dict(ablation.budgets)["pendulum"] == suites.Budget(40, 10, 0) and ablation.seeds("abl:soft") == (0, 1, 2)
+    params, source = load_hyperparams("abl:soft+min+K20", "acrobot")
+    assert source == "ablation.yml[soft+min+K20] + the env's gamma 0.9"
+    assert (params["critic_target"], params["n_fitted_iterations"], params["gamma"]) == ("min", 20, 0.9)
+    # the soft actor's rows are SoftDENFAC's (algo: soft_denfac, inherited from the row `soft`), with its arguments only
+    assert suites.ALGOS["abl:soft+min+K20"].zoo_algo == "soft_denfac" and suites.ALGOS["abl:default05"].zoo_algo == "denfac"
+    from sb3_denfac.zoo import make_model
+
+    model = make_model("soft_denfac", "Pendulum-v1", params)
+    assert (model.ent_coef, model.bootstrap_bounds, model.critic_target, model.critic_steps) == ("auto", True, "min", 25)
+    assert load_hyperparams("abl:faithful", "acrobot")[1].startswith("ablation.yml[faithful] + Figure 5 of denfac.yml[")
 
 
 def test_ablation_rows_keep_their_meaning_when_the_library_default_changes():
@@ -186,7 +243,7 @@ def test_ablation_rows_keep_their_meaning_when_the_library_default_changes():
     from sb3_denfac.denfac import DENFAC
 
     def settings(row):
-        model = DENFAC(env="Pendulum-v1", **suites.load_hyperparams(row, "pendulum")[0])
+        model = DENFAC(env="Pendulum-v1", **load_hyperparams(row, "pendulum")[0])
         return model.critic_target, model.target_policy_noise, model.actor_proximal, model.policy_kwargs["n_critics"]
 
     assert settings("abl:good") == ("min", 0.0, 0.0, 1)
@@ -204,7 +261,7 @@ def test_peers_train_within_the_first_episode(algo):
     envs = {e for suite in suites.SUITES.values() if algo in suite.algos for e in suite.envs}
     assert envs
     for env in envs:
-        params, _ = suites.load_hyperparams(algo, env)
+        params, _ = load_hyperparams(algo, env)
         length = gym.spec(env_facts(env).gym_id).max_episode_steps
         assert params.get("learning_starts", 100) <= length, (algo, env)
         if algo == "ddpg":
@@ -355,17 +412,17 @@ def test_store_keeps_first_record_and_skips_a_corrupt_tail(tmp_path):
 def test_matched_schedule_peers_take_denfacs_gradient_steps(tmp_path):
     """SAC on DENFAC's schedule trains at episode ends with as many critic steps as the default DENFAC: on the same
     budget both record the same number of gradient steps; SAC at 20 steps per env step records 20 per step."""
-    params, source = suites.load_hyperparams("sac_matched", "pendulum")
-    assert params["train_freq"] == (1, "episode") and params["gradient_steps"] == suites.denfac_critic_steps_per_episode()
+    params, source = load_hyperparams("sac_matched", "pendulum")
+    assert params["train_freq"] == (1, "episode") and params["gradient_steps"] == denfac_critic_steps_per_episode()
     assert source.startswith("sac.yml[Pendulum-v1]") and "gradient_steps=500" in source
-    assert suites.load_hyperparams("td3_matched", "acrobot")[0]["gamma"] == 0.9  # the base row's env gamma is kept
+    assert load_hyperparams("td3_matched", "acrobot")[0]["gamma"] == 0.9  # the base row's env gamma is kept
     for row in ("sac_matched", "td3_matched", "sac_utd20"):  # everything else is the base row's
-        base = suites.load_hyperparams(suites.ALGOS[row].base, "cartpole")[0]
-        mine = suites.load_hyperparams(row, "cartpole")[0]
+        base = load_hyperparams(suites.ALGOS[row].base, "cartpole")[0]
+        mine = load_hyperparams(row, "cartpole")[0]
         assert {k: v for k, v in mine.items() if k not in ("train_freq", "gradient_steps")} == {
             k: v for k, v in base.items() if k not in ("train_freq", "gradient_steps")
         }
-    assert suites.load_hyperparams("sac_utd20", "pendulum")[0]["gradient_steps"] == 20
+    assert load_hyperparams("sac_utd20", "pendulum")[0]["gradient_steps"] == 20
     status = runner.sweep(["denfac_default", "sac_matched"], ["pendulum"], [0], 3, results_dir=tmp_path, workers=0,
                           analysis=False, verbose=0)  # fmt: skip
     assert len(status["done"]) == 2
@@ -412,19 +469,27 @@ def test_cost_extrapolation_recovers_the_cost_models():
 def test_missing_cells_cost_the_seeds_left_from_measured_runs():
     import pandas as pd
 
-    from benchmarks import analysis
+    from benchmarks import tables
 
     suite = suites.Suite("t", ("pendulum", "cartpole"), ((("sac",), (0, 1, 2)),), "test")
     runs = pd.DataFrame(dict(algo=["sac", "sac"], env=["pendulum"] * 2, seed=[0, 1], cpu_time=[3600.0, 7200.0]))
-    row = analysis.missing_cells(suite, runs).iloc[0]
+    row = tables.missing_cells(suite, runs).iloc[0]
     assert row["pendulum"] == "2/3, 1.50 h"  # one seed left at the median of the measured runs
     planned = 3 * suites.estimated_cost("sac", "cartpole") / 3600
     assert row["cartpole"] == f"0/3, <={planned:.2f} h"  # no run yet: the plan's upper bound
     assert float(row["CPU hours left"]) == pytest.approx(1.5 + planned, abs=0.01)
     unplanned = suites.Suite("u", ("pendulum", "no-such-env"), ((("sac",), (0, 1, 2)),), "test")
-    row = analysis.missing_cells(unplanned, runs).iloc[0]
+    row = tables.missing_cells(unplanned, runs).iloc[0]
     assert row["no-such-env"] == "0/3, cost not measured"  # neither a run nor the plan's estimate: said, not NaN
     assert row["CPU hours left"] == "1.50 + 1 cells not measured"
+    # a smoke run (3 episodes of Pendulum's 40) is neither one of the cell's seeds nor a measure of its cost
+    smoke = runs.assign(episodes_requested=[40, 3], timesteps_requested=[None, None])
+    assert tables.missing_cells(suite, smoke).iloc[0]["pendulum"] == "1/3, 2.00 h"
+    steps = suites.Suite(
+        "s", ("Hopper-v5",), ((("sac",), (0, 1)),), "test", budgets=(("Hopper-v5", suites.Budget.steps(100, 10, 1)),)
+    )
+    of_steps = runs.assign(env="Hopper-v5", episodes_requested=[0, 0], timesteps_requested=[100, 50])
+    assert tables.missing_cells(steps, of_steps).iloc[0]["Hopper-v5"] == "1/2, 1.00 h"
 
 
 def test_bootstrap_intervals_are_reproducible_and_leave_numpys_generator_alone(monkeypatch):
@@ -451,7 +516,7 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
     """Episodes, env steps and CPU seconds at the first episode whose best-so-far reaches the level, per algorithm."""
     import pandas as pd
 
-    from benchmarks import analysis
+    from benchmarks import tables
     from benchmarks.suites import ALGOS
 
     rows = []
@@ -463,7 +528,7 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
     episodes = pd.DataFrame(rows)
     runs = pd.DataFrame([dict(algo="sac_matched", env="invertedpendulum", seed=s, fall_back=0.0, last10=v, final_eval=e)
                          for s, v, e in ((0, 833.3, 1000.0), (1, 300.0, 500.0))])  # fmt: skip
-    table = analysis.answer_table(episodes, runs, algos=("sac_matched", "denfac_default"))
+    table = tables.answer_table(episodes, runs, algos=("sac_matched", "denfac_default"))
     row = table.set_index("env").loc["invertedpendulum"]
     assert row["level"] == ">= 1000"
     assert row[ALGOS["sac_matched"].label].startswith("2 ep, 200 steps, 20 CPU s (1/2); fall-back 0.00")
@@ -474,7 +539,7 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
 def test_survival_bonus_separates_standing_from_moving(tmp_path):
     """On an env that pays a survival bonus (Hopper), a run that stands still for the whole episode and one that moves
     forward and falls can have the same return; the reports give the part beyond the bonus, which tells them apart."""
-    from benchmarks import analysis, store
+    from benchmarks import analysis, store, tables
     from benchmarks.suites import ALGOS
 
     def record(algo, returns, lengths):
@@ -492,10 +557,10 @@ def test_survival_bonus_separates_standing_from_moving(tmp_path):
     beyond = runs.set_index("algo")["last10_beyond_survival"]
     assert beyond["denfac_default"] == 0.0 and beyond["sac_matched"] == 600.0
     assert runs.set_index("algo")["last10"].nunique() == 1  # the return alone cannot tell them apart
-    table = analysis.env_table(runs, "hopper").set_index("algo")
+    table = tables.env_table(runs, "hopper").set_index("algo")
     assert table.loc[ALGOS["sac_matched"].label, "last-10 beyond the survival bonus"].startswith("600.0")
-    assert "last-10 beyond the survival bonus" not in analysis.env_table(runs.assign(env="reacher"), "reacher")
-    answer = analysis.answer_table(episodes, runs, algos=("denfac_default", "sac_matched")).set_index("level")
+    assert "last-10 beyond the survival bonus" not in tables.env_table(runs.assign(env="reacher"), "reacher")
+    answer = tables.answer_table(episodes, runs, algos=("denfac_default", "sac_matched")).set_index("level")
     assert list(answer["env"]) == ["hopper", "hopper"]  # the return's level, then the one beyond the bonus
     cell = answer.loc[">= 1000"]
     assert cell[ALGOS["denfac_default"].label].endswith("last-10 1000 (0 beyond the survival bonus)")

@@ -138,16 +138,17 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
         os.killpg(child.pid, signal.SIGKILL)
         child.wait()
     (folder,) = (killed / "checkpoints").iterdir()
-    from benchmarks.task import load_checkpoint
+    from benchmarks.checkpoints import load_checkpoint
 
     saved = load_checkpoint(folder)
     assert saved is not None and 3 <= len(saved["records"]) < episodes
     assert not store.read_runs(killed)  # the run had not finished
     from benchmarks import suites
-    from benchmarks.task import resume_model
+    from benchmarks.checkpoints import resume_model
+    from benchmarks.hyperparams import load_hyperparams
     from sb3_denfac.zoo import make_model
 
-    fresh = make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", suites.load_hyperparams(algo, "pendulum")[0])
+    fresh = make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", load_hyperparams(algo, "pendulum")[0])
     model = resume_model(fresh, folder, saved, "cpu")  # what the rerun trains on: the killed run's model and data
     steps_then = saved["records"][-1]["timesteps"]
     assert model.num_timesteps == model.replay_buffer.size() == steps_then and model._n_updates > 0
@@ -190,11 +191,12 @@ def test_every_benchmark_row_saves_and_resumes_its_run(tmp_path: Path, algo: str
     from stable_baselines3.common.callbacks import CallbackList
 
     from benchmarks import suites
-    from benchmarks.task import RunCheckpoint, load_checkpoint, resume_model
+    from benchmarks.checkpoints import RunCheckpoint, load_checkpoint, resume_model
+    from benchmarks.hyperparams import load_hyperparams
     from sb3_denfac.common.callbacks import EpisodePerformanceCallback
     from sb3_denfac.zoo import make_model
 
-    hyperparams = {**suites.load_hyperparams(algo, "pendulum")[0], "learning_starts": 50}
+    hyperparams = {**load_hyperparams(algo, "pendulum")[0], "learning_starts": 50}
     if algo not in ("denfac", "ddpg", "sac", "crossq"):
         hyperparams.pop("learning_starts")
     build = lambda: make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", hyperparams, seed=0)  # noqa: E731

@@ -1,7 +1,8 @@
 """Probe runs for issue #44: DENFAC configurations at the field's budget (Gymnasium MuJoCo, 100k env steps).
 
 A study, not a product feature: it picks which ingredients the data-efficient preset needs before the benchmark's
-``mujoco100k`` suite runs them at 5 seeds. It uses the library's public API only.
+``mujoco100k`` suite runs them at 5 seeds. It uses the library's public API, and the benchmark's reader of row files
+(``benchmarks.rows``) for ``rows.yml``.
 
 Each run trains ``DENFAC("MlpPolicy", env, seed=seed, **row)`` for ``--steps`` env steps and evaluates the policy
 deterministically on its own env (``--eval-episodes`` episodes, seeded 10_000 + seed) at the first episode end at or
@@ -24,29 +25,14 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 
+from benchmarks.rows import load_rows
+
 HERE = Path(__file__).parent
-
-
-def load_rows(path: Path = HERE / "rows.yml") -> dict[str, dict[str, Any]]:
-    """Rows as data: each is ``base`` (another row, optional) plus its own constructor arguments."""
-    raw = yaml.safe_load(path.read_text())
-    from sb3_denfac.denfac.presets import with_overrides
-
-    def resolve(name: str) -> dict[str, Any]:
-        entry = dict(raw[name] or {})
-        base = entry.pop("base", None)
-        algo = entry.pop("algo", None)
-        resolved = with_overrides(resolve(base), entry) if base else entry
-        if algo is not None:
-            resolved["algo"] = algo
-        return resolved
-
-    return {name: resolve(name) for name in raw}
+ROWS = HERE / "rows.yml"  # rows as data: each is ``base`` (another row, optional) plus its own constructor arguments
 
 
 class StepEvaluations(BaseCallback):
@@ -154,7 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--out", type=Path, default=HERE / "runs.jsonl")
     args = parser.parse_args(argv)
-    rows = load_rows()
+    rows = load_rows(ROWS)
     unknown = [r for r in args.rows if r not in rows]
     if unknown:
         parser.error(f"unknown rows {unknown}; rows.yml has {sorted(rows)}")

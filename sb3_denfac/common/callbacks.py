@@ -148,7 +148,7 @@ class EpisodePerformanceCallback(BaseCallback):
 
 class UpdateStatsCallback(BaseCallback):
     """Hands every end-of-episode update's statistics of DENFAC or SoftDENFAC (``model.last_update``, an
-    :class:`~sb3_denfac.denfac.denfac.UpdateStats`: K_e, wall time, the last fitted iteration's targets and weights) to
+    :class:`~sb3_denfac.denfac.updaters.UpdateStats`: K_e, wall time, the last fitted iteration's targets and weights) to
     ``on_update``, once per update: read when the next rollout starts (the update runs between two rollouts) and when
     training ends (the last update)."""
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -18,16 +17,8 @@ from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import (
     InputChecksMixin,
-    check_bool,
-    check_choice,
-    check_gamma,
-    check_learning_rate,
-    check_number,
-    check_positive,
-    check_sigma,
 )
 from sb3_denfac.common.compat import (
-    check_denfac_arguments,
     denfac_attributes_of_old_files,
     record_policy_defaults,
     upgrade_denfac,
@@ -35,44 +26,26 @@ from sb3_denfac.common.compat import (
 from sb3_denfac.common.device import warn_small_networks_on_gpu
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
-from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
+from sb3_denfac.common.threads import TorchThreadsMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
 from sb3_denfac.denfac.options import (
     FittedIterations,
     bootstrap_range,
-    check_fitted_iterations,
-    check_options,
     clip_bootstrap,
     fitted_iterations,
 )
-from sb3_denfac.denfac.policies import CRITIC_TARGETS, DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.settings import SETTINGS, check_settings
 from sb3_denfac.denfac.update_paths import (
     DENFAC_UPDATERS,
-    UPDATE_PATHS,
     UpdaterClasses,
     check_update_path,
     make_updater,
 )
-from sb3_denfac.denfac.updaters import FitSettings, Updater
+from sb3_denfac.denfac.updaters import FitSettings, Updater, UpdateStats
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
-
-WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
-
-
-@dataclass(frozen=True)
-class UpdateStats:
-    """What the last end-of-episode update did (``DENFAC.last_update``; None before the first): its number, K_e, its
-    wall time, and the last fitted iteration's targets q_k and weights c of eq. (4) on the rows of D they were computed
-    for (``rows`` None: all of D, in D's order)."""
-
-    n_updates: int
-    fitted_iterations: int
-    seconds: float
-    q_targets: th.Tensor
-    weights: th.Tensor
-    rows: th.Tensor | None
 
 
 class DENFAC(
@@ -215,23 +188,10 @@ class DENFAC(
         torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
-        n_fitted_iterations = check_fitted_iterations(n_fitted_iterations, update_to_data_ratio)
-        check_number("actor_steps (G)", actor_steps, minimum=0, integer=True)
-        check_number("critic_steps", critic_steps, minimum=1, integer=True)
-        check_choice("weighting", weighting, WEIGHTINGS)
-        check_number("batch_size", batch_size, minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
-        check_number("buffer_size (D)", buffer_size, minimum=2, integer=True)
-        check_gamma(gamma)
-        learning_rate = check_learning_rate("learning_rate", learning_rate)
-        check_denfac_arguments(update_path)  # sb3_denfac.common.compat: names of earlier versions
-        check_choice("update_path", update_path, UPDATE_PATHS)
-        self.prioritized, self.priority_alpha, self.priority_beta, self.priority_eps, self.actor_proximal = check_options(
-            prioritized, priority_alpha, priority_beta, priority_eps, actor_proximal, batch_size
-        )
-        self.target_policy_noise = check_number("target_policy_noise", target_policy_noise, minimum=0.0, note=" (0: off)")
-        self.target_noise_clip = check_number("target_noise_clip", target_noise_clip, minimum=0.0)
-        self.critic_target = check_choice("critic_target", critic_target, CRITIC_TARGETS)
-        self.bootstrap_bounds = check_bool("bootstrap_bounds", bootstrap_bounds)
+        arguments = locals()
+        settings = check_settings({name: arguments[name] for name in SETTINGS})  # every setting, one place
+        learning_rate = settings.pop("learning_rate")
+        self.__dict__.update(settings)  # DENFAC's own settings, as attributes of their names
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -262,27 +222,9 @@ class DENFAC(
         if self.env is not None and self.n_envs != 1:
             raise ValueError(
                 f"DENFAC needs a single environment, got n_envs={self.n_envs}: it runs one update (K fitted iterations "
-                "over the whole replay buffer) after every finished episode, and its cost is in that update, not in the "
-                "env steps. With several envs ending their episodes together, one update per n episodes learned much "
-                "less per episode (measured on Pendulum-v1); see docs/conventions.md, 'Several environments'"
+                "over the whole replay buffer) after every finished episode, and one update per n episodes ending "
+                "together learns less per episode; see docs/conventions.md, 'Several environments'"
             )
-        self.sigma = check_sigma(sigma)
-        self.torch_threads = check_torch_threads(torch_threads)
-        self.actor_learning_rate = check_learning_rate("actor_learning_rate", actor_learning_rate)
-        self.critic_learning_rate = check_learning_rate("critic_learning_rate", critic_learning_rate)
-        self.n_fitted_iterations = n_fitted_iterations
-        self.critic_steps = critic_steps
-        self.update_to_data_ratio = check_positive("update_to_data_ratio", update_to_data_ratio, none_ok=True)
-        self.actor_steps = actor_steps
-        self.reset_critic = reset_critic
-        self.reset_actor = reset_actor
-        self.inverting_gradients = inverting_gradients
-        self.weighting = weighting
-        self.adam_betas = tuple(adam_betas)
-        self.adam_eps = adam_eps
-        self.max_grad_norm = max_grad_norm
-        self.bootstrap_on_timeout = bootstrap_on_timeout
-        self.update_path = update_path
         check_holds_one_episode(self.env, self.buffer_size)
         record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
@@ -339,8 +281,7 @@ class DENFAC(
         self._update(fitted_iterations(self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio, gradient_steps))
 
     def make_updater(self) -> Updater:
-        """The updater that carries out the next update: one of :attr:`updater_classes`, as ``update_path`` picks
-        (:func:`~.update_paths.make_updater`)."""
+        """The next update's updater: one of :attr:`updater_classes`, as ``update_path`` picks (:mod:`~.update_paths`)."""
         return make_updater(self.policy, FitSettings.of(self), self.update_path, self.updater_classes).updater
 
     def _update(self, n_iterations: int | None = None) -> None:

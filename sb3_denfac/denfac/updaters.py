@@ -77,6 +77,20 @@ class FitSettings:
         )
 
 
+@dataclass(frozen=True)
+class UpdateStats:
+    """What the last end-of-episode update did (``DENFAC.last_update``; None before the first): its number, K_e, its
+    wall time, and the last fitted iteration's targets q_k and weights c of eq. (4) on the rows of D they were computed
+    for (``rows`` None: all of D, in D's order)."""
+
+    n_updates: int
+    fitted_iterations: int
+    seconds: float
+    q_targets: th.Tensor
+    weights: th.Tensor
+    rows: th.Tensor | None
+
+
 class IterationSample(NamedTuple):
     """What one fitted iteration reads of D: the rows of its critic steps and of its actor steps (transition indices,
     in draw order), and each step's mini-batch as indices into those rows, shape (steps, batch_size)."""

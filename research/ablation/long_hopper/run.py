@@ -1,13 +1,13 @@
-"""Hopper-v5 past the benchmark's 100 episodes (ablation README, section 17): does the 0.5 default's critic keep
-diverging, and what do the bootstrap bounds change? ``DENFAC("MlpPolicy", "Hopper-v5", seed=SEED)``, one torch thread;
-prints one JSON line per 10 episodes: their mean return, length and return beyond the survival bonus (return - length),
-the last update's mean q target (``train/q_target_mean``) and the process's CPU seconds.
+"""Hopper-v5 past the benchmark's 100 episodes (``research/ablation/journal.md``, section 17): does the 0.5 default's
+critic keep diverging, and what do the bootstrap bounds change? ``DENFAC("MlpPolicy", "Hopper-v5", seed=SEED)``, one
+torch thread; prints one JSON line per 10 episodes: their mean return, length and return beyond the survival bonus
+(return - length), the last update's mean q target (``train/q_target_mean``) and the process's CPU seconds.
 
 The logs here ran on 2026-12-04 at main 1aa7c83..edc87ed (2-core Intel Xeon, load average 3-4: a benchmark sweep and
-one other run beside it) with the prototype ``prototypes/value_bounds.py``, whose targets the library option
-``bootstrap_bounds=True`` (used below) computes the same way.
+one other run beside it) with the prototype ``value_bounds.py`` (research/ablation/README.md says where it is kept),
+whose targets the library option ``bootstrap_bounds=True`` (used below) computes the same way.
 
-Usage: ``OMP_NUM_THREADS=1 python benchmarks/results/ablation/long_hopper/run.py SEED EPISODES [--bounds]``
+Usage: ``OMP_NUM_THREADS=1 python research/ablation/long_hopper/run.py SEED EPISODES [--bounds]``
 """
 
 import argparse
@@ -33,9 +33,9 @@ class EveryTenEpisodes(BaseCallback):
             self.window.append((info["episode"]["r"], info["episode"]["l"]))
             if self.episodes % 10 == 0:
                 ret, length = np.array(self.window, dtype=float).T
-                stats = getattr(self.model, "_last_update_stats", None)
+                stats = self.model.last_update  # the last update's statistics (public; None before the first)
                 row = dict(ep=self.episodes, ret=ret.mean(), len=length.mean(), beyond=(ret - length).mean(),
-                           q=float(stats["q_targets"].mean()) if stats else float("nan"), cpu=time.process_time())  # fmt: skip
+                           q=float(stats.q_targets.mean()) if stats else float("nan"), cpu=time.process_time())  # fmt: skip
                 print(json.dumps(row), flush=True)
                 self.window = []
         return self.episodes < self.n_episodes

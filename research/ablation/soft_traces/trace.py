@@ -1,4 +1,4 @@
-"""Trace of one ablation configuration's updates (ablation README, section 25): per episode, its return and length,
+"""Trace of one ablation configuration's updates (``journal.md``, section 25): per episode, its return and length,
 and after the update that follows it alpha (``train/ent_coef``), the mean target (``train/q_target_mean``), the share
 of bootstrap values outside the bounds (``train/bootstrap_clip_fraction``), the critic's loss, and the soft actor's
 standard deviation (before tanh) over the states of D: median and 90th percentile.
@@ -6,8 +6,8 @@ standard deviation (before tanh) over the states of D: median and 90th percentil
 A separate run from the benchmark's (plain ``Monitor`` env, no evaluations), so it does not reproduce a sweep run's
 trajectory; it shows what the values and the policy do over one run.
 
-Usage: ``python -m benchmarks.results.ablation.soft_traces.trace soft+min+K20 acrobot 0 100 out.jsonl``
-(configuration of ``benchmarks.ablation``, short env name or Gymnasium id, seed, episodes, output file).
+Usage: ``python -m research.ablation.soft_traces.trace soft+min+K20 acrobot 0 100 out.jsonl``
+(row of ``benchmarks/configs/ablation.yml``, short env name or Gymnasium id, seed, episodes, output file).
 """
 
 import json
@@ -19,9 +19,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
 import sb3_denfac.envs  # noqa: F401  (the paper's env ids)
-from benchmarks.suites import load_hyperparams
-from sb3_denfac import DENFAC
+from benchmarks import suites
+from benchmarks.hyperparams import load_hyperparams
 from sb3_denfac.envs.facts import env_facts
+from sb3_denfac.soft_denfac import SoftDENFACPolicy
+from sb3_denfac.zoo import algorithm_class
 
 LOGGED = ("train/q_target_mean", "train/bootstrap_clip_fraction", "train/ent_coef", "train/critic_loss")
 
@@ -48,7 +50,7 @@ class Trace(BaseCallback):
         row = self.rows[-1]
         row.update({key.split("/")[1]: float(values[key]) for key in LOGGED if key in values})
         policy = self.model.policy
-        if policy.soft_actor:
+        if isinstance(policy, SoftDENFACPolicy):
             buffer = self.model.replay_buffer
             with th.no_grad():
                 _, log_std, _ = policy.actor.get_action_dist_params(th.as_tensor(buffer.observations[: buffer.size(), 0]))
@@ -60,7 +62,8 @@ def main(config: str, env_name: str, seed: int, episodes: int, out: str) -> None
     th.set_num_threads(1)
     kwargs, _ = load_hyperparams(f"abl:{config}", env_name)  # the benchmark row's, with the env's gamma
     kwargs.pop("policy")
-    model = DENFAC("MlpPolicy", Monitor(gym.make(env_facts(env_name).gym_id)), seed=seed, **kwargs)
+    algo = algorithm_class(suites.ALGOS[f"abl:{config}"].zoo_algo)  # DENFAC, or SoftDENFAC for the soft rows
+    model = algo("MlpPolicy", Monitor(gym.make(env_facts(env_name).gym_id)), seed=seed, **kwargs)
     trace = Trace(episodes)
     model.learn(10**8, callback=trace)
     with open(out, "w") as f:

@@ -1,10 +1,10 @@
-"""Section 27's comparison of the default candidates (record script): the probability that each candidate's run beats
+"""Section 27's comparison of the default candidates (``journal.md``): the probability that each candidate's run beats
 the 0.5 default's and the matched SAC's, averaged over the eight envs that all of them ran at 5 seeds (the matched
 suite's seven and Walker2d-v5), on the best-so-far, the last-10 mean and the final deterministic evaluation
 (``benchmarks.stats.probability_of_improvement``: rliable's, with its 95% interval).
 
-Runs: the sweep's rows (``results/sweep``) and the ablation's (``results/ablation`` and its ``walker2d/``); a cell in
-both is taken from the sweep. ``python -m benchmarks.results.ablation.default_choice``
+Runs: the sweep's rows (``benchmarks/results/sweep``) and the ablation's (``benchmarks/results/ablation`` and its
+``walker2d/``); a cell in both is taken from the sweep. ``python -m research.ablation.default_choice``
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import pandas as pd
 from benchmarks import analysis, store
 from benchmarks import stats as st
 
-RESULTS = Path(__file__).resolve().parents[1]
+RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 FOLDERS = (RESULTS / "sweep", RESULTS / "ablation", RESULTS / "ablation" / "walker2d")
 #: the rows compared, by the name section 27 gives them (sweep rows and their ablation twins on Walker2d-v5)
 NAMES = {

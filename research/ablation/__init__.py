@@ -1,0 +1,1 @@
+"""The DENFAC ablation study: its journal, record scripts and the prototypes' data (README.md)."""

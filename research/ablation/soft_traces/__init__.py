@@ -1,0 +1,1 @@
+"""Traces of single ablation runs (journal.md, section 25)."""

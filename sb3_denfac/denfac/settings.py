@@ -1,0 +1,104 @@
+"""DENFAC's settings, each checked here and nowhere else.
+
+The constructor's signature (``DENFAC.__init__``) is the one home of their defaults; :func:`check_settings` is the one
+place that validates them, with a ``ValueError`` naming the argument and what it must be. It returns DENFAC's own
+settings normalised (Python numbers, tuples), which the constructor stores as attributes of the same names; SB3's
+(``learning_rate``, ``buffer_size``, ``batch_size``, ``gamma``) are checked here too and stored by SB3.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sb3_denfac.common.checks import (
+    check_bool,
+    check_choice,
+    check_gamma,
+    check_learning_rate,
+    check_number,
+    check_positive,
+    check_sigma,
+)
+from sb3_denfac.common.compat import check_denfac_arguments
+from sb3_denfac.common.threads import check_torch_threads
+from sb3_denfac.denfac.options import check_fitted_iterations, check_options
+from sb3_denfac.denfac.policies import CRITIC_TARGETS
+from sb3_denfac.denfac.update_paths import UPDATE_PATHS
+
+#: ``weighting``: c_t of eq. (4) from the truncated Gaussian (Retrace-style), the authors' code quirk, or 1.
+WEIGHTINGS = ("retrace", "retrace_next_state_quirk", "none")
+
+#: The constructor arguments :func:`check_settings` reads.
+SETTINGS = (
+    "learning_rate",
+    "actor_learning_rate",
+    "critic_learning_rate",
+    "buffer_size",
+    "batch_size",
+    "gamma",
+    "n_fitted_iterations",
+    "critic_steps",
+    "actor_steps",
+    "reset_critic",
+    "reset_actor",
+    "inverting_gradients",
+    "weighting",
+    "sigma",
+    "adam_betas",
+    "adam_eps",
+    "max_grad_norm",
+    "bootstrap_on_timeout",
+    "update_path",
+    "prioritized",
+    "priority_alpha",
+    "priority_beta",
+    "priority_eps",
+    "actor_proximal",
+    "update_to_data_ratio",
+    "target_policy_noise",
+    "target_noise_clip",
+    "critic_target",
+    "bootstrap_bounds",
+    "torch_threads",
+)
+
+
+def check_adam_betas(betas: Any) -> tuple[float, float]:
+    """Adam's (beta1, beta2), each in [0, 1)."""
+    if not isinstance(betas, tuple | list) or len(betas) != 2:
+        raise ValueError(f"adam_betas must be a pair (beta1, beta2), each in [0, 1), got {betas!r}")
+    return tuple(check_number(f"adam_betas[{i}]", b, minimum=0.0, maximum=1.0 - 1e-12) for i, b in enumerate(betas))  # type: ignore[return-value]
+
+
+def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
+    """DENFAC's constructor ``arguments`` (at least :data:`SETTINGS`) checked; returns DENFAC's own settings,
+    normalised, and ``learning_rate`` (SB3 stores it)."""
+    a = arguments
+    check_number("batch_size", a["batch_size"], minimum=2, integer=True, none_ok=True, note=" (None: full batch)")
+    check_number("buffer_size (D)", a["buffer_size"], minimum=2, integer=True)
+    check_gamma(a["gamma"])
+    check_denfac_arguments(a["update_path"])  # names of earlier versions
+    settings: dict[str, Any] = dict(
+        learning_rate=check_learning_rate("learning_rate", a["learning_rate"]),
+        actor_learning_rate=check_learning_rate("actor_learning_rate", a["actor_learning_rate"]),
+        critic_learning_rate=check_learning_rate("critic_learning_rate", a["critic_learning_rate"]),
+        n_fitted_iterations=check_fitted_iterations(a["n_fitted_iterations"], a["update_to_data_ratio"]),
+        update_to_data_ratio=check_positive("update_to_data_ratio", a["update_to_data_ratio"], none_ok=True),
+        critic_steps=check_number("critic_steps", a["critic_steps"], minimum=1, integer=True),
+        actor_steps=check_number("actor_steps (G)", a["actor_steps"], minimum=0, integer=True),
+        weighting=check_choice("weighting", a["weighting"], WEIGHTINGS),
+        sigma=check_sigma(a["sigma"]),
+        adam_betas=check_adam_betas(a["adam_betas"]),
+        adam_eps=check_number("adam_eps", a["adam_eps"], minimum=0.0, exclusive_minimum=True),
+        max_grad_norm=check_positive("max_grad_norm", a["max_grad_norm"], none_ok=True),
+        update_path=check_choice("update_path", a["update_path"], UPDATE_PATHS),
+        target_policy_noise=check_number("target_policy_noise", a["target_policy_noise"], minimum=0.0, note=" (0: off)"),
+        target_noise_clip=check_number("target_noise_clip", a["target_noise_clip"], minimum=0.0),
+        critic_target=check_choice("critic_target", a["critic_target"], CRITIC_TARGETS),
+        torch_threads=check_torch_threads(a["torch_threads"]),
+    )
+    for name in ("reset_critic", "reset_actor", "inverting_gradients", "bootstrap_on_timeout", "bootstrap_bounds"):
+        settings[name] = check_bool(name, a[name])
+    names = ("prioritized", "priority_alpha", "priority_beta", "priority_eps", "actor_proximal")
+    settings.update(zip(names, check_options(*(a[n] for n in names), a["batch_size"]), strict=True))
+    return settings

@@ -1,0 +1,60 @@
+"""DENFAC's settings are checked in one place (``sb3_denfac.denfac.settings``), in step with the signature."""
+
+from __future__ import annotations
+
+import inspect
+
+import gymnasium as gym
+import pytest
+
+from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.denfac.settings import SETTINGS
+
+#: Constructor arguments that are SB3's plumbing, not settings of the algorithm (checked by SB3 or where they are used).
+PLUMBING = {
+    "self",
+    "policy",
+    "env",
+    "learning_starts",
+    "replay_buffer_class",
+    "replay_buffer_kwargs",
+    "stats_window_size",
+    "tensorboard_log",
+    "policy_kwargs",
+    "verbose",
+    "seed",
+    "device",
+    "_init_setup_model",
+}
+
+
+def test_every_argument_is_a_checked_setting_or_sb3_plumbing():
+    parameters = set(inspect.signature(DENFAC.__init__).parameters)
+    assert parameters - PLUMBING == set(SETTINGS)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(reset_critic=1), "reset_critic must be True or False"),
+        (dict(reset_actor="yes"), "reset_actor must be True or False"),
+        (dict(inverting_gradients=None), "inverting_gradients must be True or False"),
+        (dict(bootstrap_on_timeout=0), "bootstrap_on_timeout must be True or False"),
+        (dict(adam_betas=(0.9,)), "adam_betas must be a pair"),
+        (dict(adam_betas=(0.9, 1.0)), r"adam_betas\[1\] must be"),
+        (dict(adam_eps=0.0), "adam_eps must be a number > 0"),
+        (dict(max_grad_norm=-1.0), "max_grad_norm must be a number > 0 \\(or None\\)"),
+        (dict(weighting="importance"), "weighting must be one of"),
+        (dict(critic_target="max"), "critic_target must be one of"),
+    ],
+)
+def test_settings_unchecked_before_are_refused_with_their_name(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        DENFAC("MlpPolicy", gym.make("Pendulum-v1"), **kwargs)
+
+
+def test_checked_values_are_stored_normalised():
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1"), adam_betas=[0.5, 0.99], max_grad_norm=None, critic_steps=5.0)
+    assert model.adam_betas == (0.5, 0.99) and model.max_grad_norm is None
+    assert model.critic_steps == 5 and isinstance(model.critic_steps, int)
+    assert SoftDENFAC("MlpPolicy", gym.make("Pendulum-v1"), critic_steps=7.0).critic_steps == 7
