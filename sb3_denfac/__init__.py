@@ -18,7 +18,7 @@ from sb3_denfac.envs import register_envs
 
 register_envs()
 
-__version__ = "0.4.0"
+__version__ = "0.5.0"  # the one place of the version (pyproject.toml reads it)
 
 #: Public name -> the module that defines it (imported on first access, :func:`__getattr__`).
 _LAZY: dict[str, str] = {

@@ -92,20 +92,25 @@ def plot_learning_curve(
             color="tab:green",
             fontweight="bold",
         )
+    lines = []
     for (label, value), color in zip((replays or {}).items(), ("tab:red", "tab:purple"), strict=False):
         if np.isfinite(value):
             ax.axhline(value, ls="--", color=color, lw=1.5, label=f"{label}: {value:.1f}")
-            short = "final" if "model.zip" in label and "best" not in label else "best"
-            ax.annotate(
-                f" {short} {value:.0f}",
-                (1.0, value),
-                xycoords=("axes fraction", "data"),
-                color=color,
-                va="center",
-                fontsize=8,
-                annotation_clip=False,
-            )
+            lines.append(("final" if "model.zip" in label and "best" not in label else "best", value, color))
     ax.margins(y=0.08)
+    low, high = ax.get_ylim()
+    for text, value, color, offset in replay_labels(lines, high - low):
+        ax.annotate(
+            f" {text}",
+            (1.0, value),
+            xycoords=("axes fraction", "data"),
+            xytext=(0, offset),
+            textcoords="offset points",
+            color=color,
+            va="center",
+            fontsize=8,
+            annotation_clip=False,
+        )
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlim(0.5, len(performance) + 0.5)
     ax.set_xlabel("training episode")
@@ -116,6 +121,20 @@ def plot_learning_curve(
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def replay_labels(lines: list[tuple[str, float, str]], span: float) -> list[tuple[str, float, str, float]]:
+    """The labels at the right edge of the replay lines ``(name, value, colour)``: ``(text, value, colour, vertical
+    offset in points)``. Two values that print the same share one label ("final = best 500"); two within 4% of the
+    axis' ``span`` are moved apart, the higher up, so that their labels do not overlap."""
+    if len(lines) == 2 and f"{lines[0][1]:.0f}" == f"{lines[1][1]:.0f}":
+        (name, value, _), (other, _, color) = lines  # the colour of the line drawn last, on top
+        return [(f"{name} = {other} {value:.0f}", value, color, 0.0)]
+    labels = [(f"{name} {value:.0f}", value, color, 0.0) for name, value, color in lines]
+    if len(labels) == 2 and abs(labels[0][1] - labels[1][1]) < 0.04 * span:
+        up = 0 if labels[0][1] >= labels[1][1] else 1
+        labels = [(text, value, color, 5.0 if i == up else -5.0) for i, (text, value, color, _) in enumerate(labels)]
+    return labels
 
 
 def evaluate(model, env_id: str, seed: int) -> float:

@@ -18,12 +18,20 @@ def test_class_documents_every_argument(name: str, algo_class) -> None:
 
 
 def test_package_version_is_the_distribution_version() -> None:
-    """``sb3_denfac.__version__`` is the version ``pyproject.toml`` builds (saved models and bug reports quote it)."""
+    """``sb3_denfac.__version__`` is the one place of the version: ``pyproject.toml`` reads it, the CHANGELOG's newest
+    section is that version, and the installed distribution says it (saved models and bug reports quote it)."""
+    import importlib.metadata
+    import re
     from pathlib import Path
 
     import tomllib
 
     import sb3_denfac
 
-    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
-    assert sb3_denfac.__version__ == pyproject["project"]["version"]
+    root = Path(__file__).resolve().parents[1]
+    pyproject = tomllib.loads((root / "pyproject.toml").read_text())
+    assert "version" not in pyproject["project"] and "version" in pyproject["project"]["dynamic"]
+    assert pyproject["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "sb3_denfac.__version__"}
+    newest = re.search(r"^## \[(\d+\.\d+\.\d+)\]", (root / "CHANGELOG.md").read_text(), re.MULTILINE)
+    assert newest is not None and newest.group(1) == sb3_denfac.__version__
+    assert importlib.metadata.version("sb3-denfac") == sb3_denfac.__version__

@@ -39,7 +39,7 @@ def test_target_q_is_the_minimum_and_forward_is_q1(twin_model):
         values = th.cat(critic.all_q(obs, actions), dim=1)
         critic.twin_qfs[0][-1].bias += (values[:, 0] - values[:, 1]).median()  # Q_2 below Q_1 on about half the inputs
         values = th.cat(critic.all_q(obs, actions), dim=1)
-        th.testing.assert_close(critic.target_q(obs, actions), values.min(dim=1, keepdim=True).values)
+        th.testing.assert_close(critic.target_q(obs, actions, "min"), values.min(dim=1, keepdim=True).values)
         th.testing.assert_close(critic(obs, actions), values[:, :1])
     assert (values.argmin(dim=1) == 0).any() and (values.argmin(dim=1) != 0).any()  # the minimum is not always Q_1
 
@@ -86,7 +86,7 @@ def test_the_fast_updater_has_every_critic(twin_model):
     obs = model.replay_buffer.all_samples().observations
     actions = updater.actor(obs)
     with th.no_grad():
-        th.testing.assert_close(updater.critic(obs, actions), model.critic.target_q(obs, actions))
+        th.testing.assert_close(updater.critic(obs, actions), model.critic.target_q(obs, actions, model.critic_target))
     updater.fit_critic(obs, actions, th.zeros(len(obs), 1), th.ones(len(obs), 1))
     updater.finish()  # every Q network's Adam state is written back into the one critic optimizer
     assert all(p in model.critic.optimizer.state for p in model.critic.parameters())

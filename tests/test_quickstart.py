@@ -50,3 +50,19 @@ def test_quickstart_unknown_env_id(tmp_path, capsys, env_id, close):
     assert len(err.splitlines()) == 1 and repr(env_id) in err
     assert close is None or close in err
     assert not (tmp_path / "runs").exists()
+
+
+def test_quickstart_plot_labels_equal_or_close_replays_apart(tmp_path):
+    """The final and the best policy's replays: one label "final = best" where they print the same value, labels moved
+    apart where they are close, left alone where they are far apart."""
+    from sb3_denfac.quickstart import plot_learning_curve, replay_labels
+
+    same = replay_labels([("final", 500.0, "tab:red"), ("best", 500.0, "tab:purple")], 400.0)
+    assert same == [("final = best 500", 500.0, "tab:purple", 0.0)]
+    close = replay_labels([("final", 250.0, "tab:red"), ("best", 256.0, "tab:purple")], 400.0)
+    assert [(text, offset) for text, _, _, offset in close] == [("final 250", -5.0), ("best 256", 5.0)]
+    far = replay_labels([("final", 100.0, "tab:red"), ("best", 400.0, "tab:purple")], 400.0)
+    assert [offset for *_, offset in far] == [0.0, 0.0]
+    replays = {"final policy, deterministic (model.zip)": 500.0, "best episode's policy (best_model.zip, episode 2)": 500.0}
+    plot_learning_curve(np.array([500.0, 300.0, 450.0]), "env", "denfac", True, tmp_path / "curve.png", replays=replays)
+    assert (tmp_path / "curve.png").stat().st_size > 1000

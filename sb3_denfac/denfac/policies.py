@@ -111,7 +111,7 @@ class DENFACCritic(BaseModel):
         """Q_1(s, a), shape (N, 1): the value the actor ascends (SB3's ``q1_forward``)."""
         return self.qf(self.q_inputs(obs, actions))
 
-    def target_q(self, obs: th.Tensor, actions: th.Tensor, how: str = "min") -> th.Tensor:
+    def target_q(self, obs: th.Tensor, actions: th.Tensor, how: str) -> th.Tensor:
         """The bootstrap value of the targets of eq. (4), shape (N, 1): Q_1, ..., Q_n combined by
         :func:`combine_critics` (``how`` "min": clipped double Q)."""
         return combine_critics(self.all_q(obs, actions), how)
