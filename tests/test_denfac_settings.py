@@ -58,3 +58,21 @@ def test_checked_values_are_stored_normalised():
     assert model.adam_betas == (0.5, 0.99) and model.max_grad_norm is None
     assert model.critic_steps == 5 and isinstance(model.critic_steps, int)
     assert SoftDENFAC("MlpPolicy", gym.make("Pendulum-v1"), critic_steps=7.0).critic_steps == 7
+
+
+def test_settings_the_others_make_meaningless_are_named_in_a_warning():
+    """A value other than the default for a setting the others switch off is ignored: the constructor says so."""
+    env = gym.make("Pendulum-v1")
+    with pytest.warns(UserWarning, match=r"ignores critic_target='min', priority_alpha=0.7: critic_target needs"):
+        DENFAC("MlpPolicy", env, critic_target="min", priority_alpha=0.7, policy_kwargs=dict(n_critics=1))
+    with pytest.warns(UserWarning, match=r"ignores target_noise_clip=0.3"):
+        DENFAC("MlpPolicy", env, target_policy_noise=0.0, target_noise_clip=0.3)
+    import warnings
+
+    from sb3_denfac import presets
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for kwargs in ({}, presets.PAPER, presets.DATA_EFFICIENT, dict(prioritized="critic", priority_alpha=0.7)):
+            DENFAC("MlpPolicy", env, **kwargs)
+        SoftDENFAC("MlpPolicy", env, critic_target="min")

@@ -145,15 +145,32 @@ def test_small_networks_on_cuda_through_auto_warn_once(name: str, make_model, mo
         make_model(name, device="cpu")  # an explicit device: the caller's choice
 
 
+@pytest.mark.skipif(th.cuda.is_available(), reason="needs a machine without CUDA")
+@pytest.mark.algorithms("all")
+def test_cuda_asked_where_there_is_none_warns_and_runs_on_the_cpu(name: str, make_model, monkeypatch) -> None:
+    """SB3 falls back to the CPU without a word when device="cuda" finds no CUDA; every algorithm here says so, once."""
+    import warnings
+
+    from sb3_denfac.common import device as device_module
+
+    monkeypatch.setattr(device_module, "_warned", set())
+    with pytest.warns(UserWarning, match=r"device='cuda' but CUDA is not available here.*runs on the CPU"):
+        model = make_model(name, device="cuda")
+    assert model.device.type == "cpu" and all(p.device.type == "cpu" for p in model.policy.parameters())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make_model(name, device="cuda").learn(20)  # once per algorithm; it trains on
+
+
 def test_small_network_warning_rules() -> None:
-    from sb3_denfac.common.device import warn_small_networks_on_gpu
+    from sb3_denfac.common.device import warn_about_device
 
     small, big = th.nn.Linear(4, 4), th.nn.Linear(1000, 1000)
-    assert not warn_small_networks_on_gpu("X1", "auto", th.device("cpu"), small)
-    assert not warn_small_networks_on_gpu("X1", "cuda", th.device("cuda"), small)
-    assert not warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), big)
+    assert not warn_about_device("X1", "auto", th.device("cpu"), small)
+    assert not warn_about_device("X1", "cuda", th.device("cuda"), small)
+    assert not warn_about_device("X1", "auto", th.device("cuda"), big)
     with pytest.warns(UserWarning, match="X1 is running on the GPU"):
-        assert warn_small_networks_on_gpu("X1", "auto", th.device("cuda"), small)
+        assert warn_about_device("X1", "auto", th.device("cuda"), small)
 
 
 def test_denfac_with_several_envs_says_why_and_where_to_read(make_env) -> None:

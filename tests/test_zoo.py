@@ -22,6 +22,7 @@ from rl_zoo3.exp_manager import ExperimentManager
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from sb3_denfac import zoo
+from sb3_denfac.zoo import cli
 from sb3_denfac.zoo import samplers as zoo_samplers
 
 ENV = "sb3_denfac/ContinuousCartPole-v0"  # the cheapest of the paper's envs
@@ -116,6 +117,17 @@ def _saved_zoo_agent(logs: Path, env_id: str) -> None:
     CMAES("MlpPolicy", gym.make(env_id, max_episode_steps=10), population_size=2).save(folder / env_id.replace("/", "-"))
 
 
+def test_enjoy_without_a_folder_reads_what_train_wrote(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without -f, enjoy looks where train writes by default (logs/), not in the zoo's rl-trained-agents (a Hugging
+    Face download of agents the hub does not have); with nothing there it names the folder it looked in."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit, match=r"the log folder .logs. does not exist"):
+        zoo.main(["enjoy", "--algo", "cmaes", "--env", ENV, "--no-render"])
+    _saved_zoo_agent(tmp_path / "logs", ENV)
+    zoo.main(["enjoy", "--algo", "cmaes", "--env", ENV, "-n", "20", "--no-render", "--deterministic"])
+    assert cli.with_default_folder(["--algo", "td3", "--env", ENV]) == ["--algo", "td3", "--env", ENV]  # the zoo's own
+
+
 @pytest.mark.parametrize("env_id", ["sb3_denfac/ContinuousAcrobot-v0", ENV])
 def test_record_video_writes_an_mp4(tmp_path: Path, env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """With the video extra, record_video renders a paper env headless and writes a small mp4."""
@@ -161,6 +173,11 @@ def test_optimize_on_sqlite_resumes_the_study(tmp_path: Path) -> None:
     trials = _study(logs, OPTIMIZE_ALGO).trials
     assert len(trials) == 3
     assert [t.params for t in trials[:2]] == [t.params for t in first]
+
+    other_budget = [a if a != "200" else "150" for a in argv]  # -n 150: trials not comparable with the study's
+    with pytest.raises(SystemExit, match=r"made with n_timesteps=200 \(3 finished trials\); this run asks for 150"):
+        zoo.main([*other_budget, *tune, "--n-trials", "1", "--seed", "4"])
+    assert len(_study(logs, OPTIMIZE_ALGO).trials) == 3
 
     zoo.main([*argv, "--trial-id", "1", "--eval-freq", "-1", "--seed", "3"])  # the zoo ignores --trial-id 0
     (model_path,) = (logs / OPTIMIZE_ALGO).glob(f"*/{ENV_FOLDER}.zip")
@@ -238,8 +255,10 @@ def test_sampled_hyperparameters_fit_the_constructor(algo: str) -> None:
 
 def test_denfac_sampler_tunes_the_stability_options() -> None:
     """The DENFAC sampler offers both values of n_critics, the plain ascent (lambda 0) besides proximal actors, both
-    critic targets with and without smoothing, with and without bootstrap bounds, and the model the zoo builds from a
-    trial has what was sampled."""
+    critic targets (with two critics: one has nothing to combine) with and without smoothing, with and without
+    bootstrap bounds, and the model the zoo builds from a trial has what was sampled, with no ignored setting."""
+    import warnings
+
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("denfac")), ENV)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     seen: set[tuple[int, bool]] = set()
@@ -249,15 +268,19 @@ def test_denfac_sampler_tunes_the_stability_options() -> None:
         trial = study.ask()
         trial.set_user_attr(zoo_samplers.ENTRY_POLICY_KWARGS, entry["policy_kwargs"])
         sampled = zoo_samplers.sample_denfac_params(trial, 1, 1, {})
-        model = zoo.make_model("denfac", ENV, {**entry, **sampled}, device="cpu")
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", message=".* ignores ")
+            model = zoo.make_model("denfac", ENV, {**entry, **sampled}, device="cpu")
         assert len(model.critic.q_networks) == trial.params["n_critics"]
         assert model.actor_proximal == trial.params["actor_proximal"]
-        assert model.critic_target == trial.params["critic_target"]
+        assert ("critic_target" in trial.params) == (trial.params["n_critics"] == 2)
+        assert model.critic_target == trial.params.get("critic_target", "mean")
         assert model.target_policy_noise == trial.params["target_policy_noise"]
         assert model.bootstrap_bounds == trial.params["bootstrap_bounds"]
         bounds.add(model.bootstrap_bounds)
         seen.add((trial.params["n_critics"], trial.params["actor_proximal"] > 0))
-        targets.add((trial.params["critic_target"], trial.params["target_policy_noise"] > 0))
+        if trial.params["n_critics"] == 2:
+            targets.add((trial.params["critic_target"], trial.params["target_policy_noise"] > 0))
         model.get_env().close()
     assert seen == {(1, False), (1, True), (2, False), (2, True)}
     assert targets == {("mean", False), ("mean", True), ("min", False), ("min", True)}
@@ -270,12 +293,13 @@ def test_soft_denfac_sampler_offers_only_its_own_settings() -> None:
     entry = zoo.select_entry(zoo.load_config_file(zoo.default_config_path("soft_denfac")), ENV)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     starts: set[str] = set()
-    for _ in range(8):
+    for _ in range(16):
         trial = study.ask()
         sampled = zoo_samplers.sample_soft_denfac_params(trial, 1, 1, {})
         assert not {"sigma", "inverting_gradients", "actor_proximal", "target_policy_noise", "weighting"} & set(sampled)
         model = zoo.make_model("soft_denfac", ENV, {**entry, **sampled}, device="cpu")
-        assert model.ent_coef == trial.params["ent_coef"] and model.critic_target == trial.params["critic_target"]
+        assert model.ent_coef == trial.params["ent_coef"]
+        assert model.critic_target == trial.params.get("critic_target", "mean")
         starts.add(model.ent_coef)
         model.get_env().close()
     assert starts == {"auto", "auto_0.1", "auto_0.01"}

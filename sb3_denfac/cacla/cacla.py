@@ -15,7 +15,7 @@ from torch.nn import functional as F
 
 from sb3_denfac.cacla.policies import CACLAPolicy, MlpPolicy
 from sb3_denfac.common.checks import check_number, check_positive
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
@@ -115,7 +115,7 @@ class CACLA(DeterministicOnPolicyAlgorithm):
         self.bn_window = bn_window
         if _init_setup_model:
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         super()._setup_model()

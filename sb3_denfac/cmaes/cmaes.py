@@ -21,7 +21,7 @@ from sb3_denfac.cmaes.policies import CMAESPolicy, MlpPolicy
 from sb3_denfac.common.budget import budget_reached
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_choice, check_number, check_positive, check_sigma
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 from sb3_denfac.common.truncated_normal import sample_truncated_normal
 
@@ -152,7 +152,7 @@ class CMAES(InputChecksMixin, TorchThreadsMixin, ProgressBarMixin, BaseAlgorithm
         self._episode_num = 0
         if _init_setup_model:
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         self.set_random_seed(self.seed)

@@ -1,8 +1,12 @@
-"""Devices: the five algorithms' networks are tiny, and a GPU only adds transfer and launch latency to them.
+"""Devices: the algorithms' networks are tiny, and a GPU only adds transfer and launch latency to them.
 
-:func:`warn_small_networks_on_gpu` follows SB3's warning for PPO with an MLP policy on the GPU: when ``device="auto"``
-picked CUDA for a policy of fewer than :data:`SMALL_NETWORK_PARAMETERS` parameters, one ``UserWarning`` per algorithm
-and process says so and how to run on the CPU. An explicit ``device="cuda"`` is the caller's choice: no warning.
+:func:`warn_about_device`, called by every algorithm once its policy is built, warns once per algorithm and process:
+
+- when ``device="cuda"`` (or ``"cuda:N"``) was asked where CUDA is not available: SB3 then runs on the CPU without a
+  word (``get_device``); the run goes on there, and the warning says so;
+- following SB3's warning for PPO with an MLP policy on the GPU: when ``device="auto"`` picked CUDA for a policy of
+  fewer than :data:`SMALL_NETWORK_PARAMETERS` parameters, it says so and how to run on the CPU. An explicit
+  ``device="cuda"`` on a GPU is the caller's choice: no warning.
 """
 
 from __future__ import annotations
@@ -22,9 +26,22 @@ def _is_cuda(device: th.device | str) -> bool:
     return th.device(device).type == "cuda"
 
 
-def warn_small_networks_on_gpu(algorithm: str, requested: Any, device: th.device, policy: th.nn.Module) -> bool:
-    """Warn once per ``algorithm`` if ``requested`` was "auto", ``device`` is CUDA and ``policy`` is small; returns
-    whether it warned."""
+def warn_about_device(algorithm: str, requested: Any, device: th.device, policy: th.nn.Module) -> bool:
+    """Warn once per ``algorithm`` (module docstring) if CUDA was asked where there is none, or if ``requested`` was
+    "auto", ``device`` is CUDA and ``policy`` is small; returns whether it warned."""
+    asked_cuda = not (isinstance(requested, str) and requested == "auto") and _is_cuda(requested)
+    if asked_cuda and not _is_cuda(device):
+        key = f"{algorithm}: no CUDA"
+        if key in _warned:
+            return False
+        _warned.add(key)
+        warnings.warn(
+            f"{algorithm} was given device={str(requested)!r} but CUDA is not available here "
+            f"(torch.cuda.is_available() is False): it runs on the {device.type.upper()}, as SB3 falls back.",
+            UserWarning,
+            stacklevel=3,
+        )
+        return True
     if not (isinstance(requested, str) and requested == "auto") or not _is_cuda(device):
         return False
     n_parameters = sum(p.numel() for p in policy.parameters())

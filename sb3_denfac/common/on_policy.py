@@ -33,7 +33,7 @@ from sb3_denfac.common.actor_value_policy import DeterministicActorValuePolicy
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_positive, check_sigma
 from sb3_denfac.common.compat import ON_POLICY_TORCH_NAMES_0_2, LegacyTorchNamesMixin
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin, check_torch_threads
 
@@ -168,7 +168,7 @@ class DeterministicOnPolicyAlgorithm(
         self.torch_threads = check_torch_threads(torch_threads)
         if _init_setup_model:
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         self._setup_lr_schedule()

@@ -17,7 +17,7 @@ from torch.nn import functional as F
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
 from sb3_denfac.common.checks import InputChecksMixin, check_gamma, check_learning_rate, check_number, check_sigma
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
@@ -171,7 +171,7 @@ class DDPG(
             raise ValueError("inverting_gradients=True needs a DDPGPolicy (unbounded actor)")
         if _init_setup_model:
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         super()._setup_model()

@@ -23,7 +23,7 @@ from sb3_denfac.common.compat import (
     record_policy_defaults,
     upgrade_denfac,
 )
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin
@@ -36,7 +36,7 @@ from sb3_denfac.denfac.options import (
     fitted_iterations,
 )
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
-from sb3_denfac.denfac.settings import SETTINGS, check_settings
+from sb3_denfac.denfac.settings import SETTINGS, check_settings, warn_ignored_settings
 from sb3_denfac.denfac.update_paths import (
     DENFAC_UPDATERS,
     UpdaterClasses,
@@ -228,8 +228,9 @@ class DENFAC(
         check_holds_one_episode(self.env, self.buffer_size)
         record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
+            warn_ignored_settings(self)
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _setup_model(self) -> None:
         upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings

@@ -8,6 +8,8 @@ settings normalised (Python numbers, tuples), which the constructor stores as at
 
 from __future__ import annotations
 
+import inspect
+import warnings
 from typing import Any
 
 from sb3_denfac.common.checks import (
@@ -102,3 +104,28 @@ def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
     names = ("prioritized", "priority_alpha", "priority_beta", "priority_eps", "actor_proximal")
     settings.update(zip(names, check_options(*(a[n] for n in names), a["batch_size"]), strict=True))
     return settings
+
+
+def warn_ignored_settings(model: Any) -> list[str]:
+    """Warn, once per constructor call, about settings given a value that the others make meaningless (a value other
+    than the signature's default, which the algorithm then ignores); returns the names warned about."""
+    defaults = {name: p.default for name, p in inspect.signature(type(model).__init__).parameters.items()}
+    ignored = {
+        "critic_target": model.policy_kwargs.get("n_critics", 2) == 1,  # one critic: its value, whatever combines it
+        "target_noise_clip": model.target_policy_noise == 0,  # no noise to clip
+        "priority_alpha": model.prioritized == "none",
+        "priority_beta": model.prioritized == "none",
+        "priority_eps": model.prioritized == "none",
+    }
+    names = [
+        name for name, unused in ignored.items() if unused and name in defaults and getattr(model, name) != defaults[name]
+    ]
+    if names:
+        warnings.warn(
+            f"{type(model).__name__} ignores {', '.join(f'{n}={getattr(model, n)!r}' for n in names)}: "
+            "critic_target needs n_critics > 1, target_noise_clip a target_policy_noise > 0, the priority_* settings "
+            "prioritized='critic' or 'both'",
+            UserWarning,
+            stacklevel=3,
+        )
+    return names

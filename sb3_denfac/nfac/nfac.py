@@ -12,7 +12,7 @@ from torch.nn import functional as F
 
 from sb3_denfac.common.budget import budget_reached
 from sb3_denfac.common.checks import check_positive
-from sb3_denfac.common.device import warn_small_networks_on_gpu
+from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.on_policy import (
     DeterministicOnPolicyAlgorithm,
     Transitions,
@@ -139,7 +139,7 @@ class NFAC(DeterministicOnPolicyAlgorithm):
         self.update_critic_first = update_critic_first
         if _init_setup_model:
             self._setup_model()
-            warn_small_networks_on_gpu(type(self).__name__, device, self.device, self.policy)
+            warn_about_device(type(self).__name__, device, self.device, self.policy)
 
     def _rollout_done(self, n_steps: int, n_episodes: int, n_rollout_steps: int) -> bool:
         return n_episodes >= self.n_episodes or budget_reached(self)  # an unfinished episode is used as it is

@@ -15,7 +15,9 @@ the zoo's tables, then the command goes to ``rl_zoo3.train.train``, ``rl_zoo3.en
 - ``--conf-file`` defaults to this package's ``hyperparams/<algo>.yml`` (for td3/sac/crossq only when that
   file has an entry for the env; otherwise the zoo's own file is used);
 - with ``-optimize`` and no ``--storage``, the study is kept in ``sqlite:///<log-folder>/optuna.db`` under the study
-  name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study;
+  name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study; a study
+  records its budget (``n_timesteps``) and a run with another budget is refused rather than mixed into it;
+- ``enjoy`` without ``-f`` reads ``logs/`` (``train``'s default) for this package's algorithms;
   ``--trial-id`` reads the same study by default;
 - an entry's ``preset`` (e.g. ``preset: paper``) is expanded (:func:`~sb3_denfac.zoo.config.expand_preset`), after the
   zoo's own reading, so ``-params`` and ``--trial-id`` values override the preset too;
@@ -164,7 +166,26 @@ class CheckedExperimentManager(ExperimentManager):
             self._tuned_policy_kwargs()  # fails before the first trial
         if self.storage.startswith("sqlite:///"):
             Path(self.storage.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+        self._check_study_budget()
         super().hyperparameters_optimization()
+
+    def _check_study_budget(self) -> None:
+        """Trials are comparable only at one budget: the study records its ``n_timesteps`` when it is made, and a run
+        that would add trials of another budget to it is refused (the zoo would silently join it)."""
+        try:
+            study = optuna.load_study(study_name=self.study_name, storage=self.storage)
+        except KeyError:  # a new study, made here as the zoo makes it (the zoo then loads it)
+            study = optuna.create_study(study_name=self.study_name, storage=self.storage, direction="maximize")
+        budget = study.user_attrs.get("n_timesteps")
+        if budget is None:
+            study.set_user_attr("n_timesteps", int(self.n_timesteps))
+        elif int(budget) != int(self.n_timesteps):
+            finished = len(study.get_trials(states=(optuna.trial.TrialState.COMPLETE,)))
+            raise ZooConfigError(
+                f"the Optuna study {self.study_name!r} ({self.storage}) was made with n_timesteps={budget} "
+                f"({finished} finished trials); this run asks for {self.n_timesteps}, and trials of two budgets are not "
+                "comparable: pass the same -n, or --study-name for a new study"
+            )
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -235,7 +256,7 @@ def train(argv: Sequence[str]) -> None:
         rl_zoo3.train.ExperimentManager = ExperimentManager
 
 
-def check_enjoy_folder(argv: Sequence[str]) -> None:
+def check_enjoy_folder(argv: Sequence[str], command: str = "enjoy") -> None:
     """Fail, naming the folder looked in, if ``enjoy``'s ``-f`` folder has no run of ``--algo`` on ``--env`` (the zoo
     itself raises a bare AssertionError). The zoo's default folder ``rl-trained-agents`` is left to the zoo (it
     downloads pretrained agents from the Hugging Face hub)."""
@@ -251,13 +272,14 @@ def check_enjoy_folder(argv: Sequence[str]) -> None:
         return
     env_name = args.env.replace("/", "-").split(":")[-1]  # the zoo's folder name of an env id (EnvironmentName)
     folder, algo_folder = Path(args.folder), Path(args.folder) / args.algo
-    hint = "pass -f with the log folder given to `sb3-denfac-zoo train -f` (the zoo's default: logs)"
+    hint = f"pass -f with the log folder given to `sb3-denfac-zoo train -f` (the default of both: {TRAIN_LOG_FOLDER})"
     if not folder.is_dir():
-        raise ZooConfigError(f"enjoy: the log folder {str(folder)!r} does not exist (working directory {Path.cwd()}): {hint}")
+        where = f"working directory {Path.cwd()}"
+        raise ZooConfigError(f"{command}: the log folder {str(folder)!r} does not exist ({where}): {hint}")
     if not algo_folder.is_dir():
         found = sorted(p.name for p in folder.iterdir() if p.is_dir())
         raise ZooConfigError(
-            f"enjoy: no {args.algo!r} runs in {str(folder)!r}: the folder {str(algo_folder)!r} does not exist "
+            f"{command}: no {args.algo!r} runs in {str(folder)!r}: the folder {str(algo_folder)!r} does not exist "
             f"(algorithms found there: {', '.join(found) or 'none'}); {hint}"
         )
     if args.exp_id >= 0:
@@ -267,14 +289,33 @@ def check_enjoy_folder(argv: Sequence[str]) -> None:
             what = f"the run folder {str(wanted)!r}" if wanted is not None else f"a run folder {env_name}_<n>"
             others = sorted(p.name for p in algo_folder.iterdir() if p.is_dir())
             raise ZooConfigError(
-                f"enjoy: {what} of {args.algo} on {args.env} was not found in {str(algo_folder)!r} (found: "
+                f"{command}: {what} of {args.algo} on {args.env} was not found in {str(algo_folder)!r} (found: "
                 f"{', '.join(others) or 'nothing'}); check --env and --exp-id (0: the latest run)"
             )
+
+
+#: ``train``'s default log folder (rl_zoo3's ``-f``), where ``enjoy`` looks for this package's algorithms by default.
+TRAIN_LOG_FOLDER = "logs"
+
+
+def with_default_folder(argv: Sequence[str]) -> list[str]:
+    """``enjoy``'s argv with ``-f logs`` (what ``train`` writes by default) when no folder is given and ``--algo`` is
+    one of this package's: the zoo's own default, ``rl-trained-agents``, downloads pretrained agents from the Hugging
+    Face hub, which has none of them."""
+    argv = list(argv)
+    if any(a in ("-f", "--folder") or a.startswith("--folder=") for a in argv):
+        return argv
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--algo", default="ppo")
+    if parser.parse_known_args(argv)[0].algo in ALGORITHMS:
+        argv += ["-f", TRAIN_LOG_FOLDER]
+    return argv
 
 
 def enjoy(argv: Sequence[str]) -> None:
     from rl_zoo3.enjoy import enjoy as zoo_enjoy
 
+    argv = with_default_folder(argv)
     check_enjoy_folder(argv)
     _run_with_argv("sb3-denfac-zoo enjoy", with_default_threads(argv), zoo_enjoy)
 
@@ -291,6 +332,8 @@ def record_video(argv: Sequence[str]) -> None:
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # pygame without a display
     if not os.environ.get("DISPLAY"):
         os.environ.setdefault("MUJOCO_GL", "egl")  # Half-Cheetah: MuJoCo's headless OpenGL
+    argv = with_default_folder(argv)
+    check_enjoy_folder(argv, "record_video")
     # rl_zoo3.record_video is a script (its code runs under `if __name__ == "__main__"`).
     _run_with_argv("sb3-denfac-zoo record_video", argv, lambda: runpy.run_module("rl_zoo3.record_video", run_name="__main__"))
 

@@ -79,6 +79,7 @@ def convert_denfac_params(params: dict[str, Any]) -> dict[str, Any]:
 def _fitted_iteration_params(trial: optuna.Trial) -> dict[str, Any]:
     """What DENFAC and SoftDENFAC share: alpha_a, alpha_c, K, G, critic steps, D, reset critic, network sizes, the
     number of critics, and how eq. (4)'s targets combine them (``critic_target``) and bound the bootstrap value."""
+    n_critics = trial.suggest_categorical("n_critics", [1, 2])
     return {
         "actor_learning_rate": trial.suggest_float("actor_learning_rate", 1e-5, 0.1, log=True),
         "critic_learning_rate": trial.suggest_float("critic_learning_rate", 1e-5, 0.1, log=True),
@@ -89,8 +90,9 @@ def _fitted_iteration_params(trial: optuna.Trial) -> dict[str, Any]:
         "reset_critic": trial.suggest_categorical("reset_critic", [False, True]),
         "actor_arch": trial.suggest_categorical("actor_arch", list(ACTOR_ARCHS)),
         "critic_arch": trial.suggest_categorical("critic_arch", list(CRITIC_ARCHS)),
-        "n_critics": trial.suggest_categorical("n_critics", [1, 2]),
-        "critic_target": trial.suggest_categorical("critic_target", ["mean", "min"]),
+        "n_critics": n_critics,
+        # how several critics combine: with one there is nothing to combine (the constructor warns on "min")
+        **({"critic_target": trial.suggest_categorical("critic_target", ["mean", "min"])} if n_critics > 1 else {}),
         "bootstrap_bounds": trial.suggest_categorical("bootstrap_bounds", [False, True]),
     }
 
