@@ -15,6 +15,7 @@ from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
+from sb3_denfac.common.checks import UnsupportedSpaceError
 
 # ----- spaces and normalisation (SB3 tests/test_spaces.py, test_vec_normalize.py) --------------------------------------
 
@@ -96,6 +97,30 @@ def test_discrete_observation_spaces(
         action, _ = model.predict(observations[0], deterministic=deterministic)
         assert action.shape == (1,) and env.action_space.contains(action)
         assert model.predict(observations, deterministic=deterministic)[0].shape == (3, 1)
+
+
+GOAL_SPACE = spaces.Dict(
+    {
+        "observation": spaces.Box(-1.0, 1.0, (3,)),
+        "achieved_goal": spaces.Box(-1.0, 1.0, (2,)),
+        "desired_goal": spaces.Box(-1.0, 1.0, (2,)),
+    }
+)
+
+
+@pytest.mark.algorithms("all")
+def test_dict_observations_are_refused_with_the_way_around(name: str, episode_steps, algo_class, make_model) -> None:
+    """A goal-conditioned env's Dict observation: "MlpPolicy" and "MultiInputPolicy" are both refused with an error that
+    names the cause and the way around (SB3 said "use MultiInputPolicy", then "Policy MultiInputPolicy unknown": a dead
+    end); flattened, the same env trains."""
+    env = gym.wrappers.TimeLimit(SpacesEnv(GOAL_SPACE, spaces.Box(-1.0, 1.0, shape=(2,))), episode_steps)
+    for policy, cause in (("MlpPolicy", "the env's observation space is a Dict with keys"), ("MultiInputPolicy", "Dict")):
+        with pytest.raises(UnsupportedSpaceError, match=rf"no MultiInputPolicy: {cause}.*FlattenObservation"):
+            algo_class(name)(policy, env)
+    flat = gym.wrappers.FlattenObservation(env)
+    model = make_model(name, env=flat)
+    model.learn(2 * episode_steps)
+    assert model.predict(flat.observation_space.sample())[0].shape == (2,)
 
 
 @pytest.mark.algorithms("all")

@@ -123,6 +123,36 @@ def check_action_space(algorithm: str, space: spaces.Space) -> None:
         raise UnsupportedSpaceError(f"{algorithm} needs finite action bounds (actions are scaled to [-1, 1]), got {space}")
 
 
+#: SB3's policy name for Dict observations, which no algorithm of this package implements yet.
+MULTI_INPUT_POLICY = "MultiInputPolicy"
+
+
+def _no_dict_observations(algorithm: str, what: str) -> UnsupportedSpaceError:
+    return UnsupportedSpaceError(
+        f"{algorithm} has no {MULTI_INPUT_POLICY}: {what}. Its policies take Box, Discrete, MultiDiscrete or MultiBinary "
+        "observations; flatten a Dict observation into one vector with gymnasium.wrappers.FlattenObservation(env) "
+        "and use 'MlpPolicy' (goal relabelling with HerReplayBuffer needs the Dict and is not supported yet)"
+    )
+
+
+def check_observation_space(algorithm: str, space: spaces.Space) -> None:
+    """Raise an :class:`UnsupportedSpaceError` for a Dict (or Tuple) observation space, naming the way around it."""
+    if isinstance(space, spaces.Dict | spaces.Tuple):
+        keys = f" with keys {list(space.spaces)}" if isinstance(space, spaces.Dict) else ""
+        raise _no_dict_observations(algorithm, f"the env's observation space is a {type(space).__name__}{keys}")
+
+
+class PolicyNameMixin:
+    """SB3 answers ``"MultiInputPolicy"`` with "Policy MultiInputPolicy unknown": this names the cause instead."""
+
+    policy_aliases: dict[str, type[BasePolicy]]
+
+    def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
+        if policy_name == MULTI_INPUT_POLICY and policy_name not in self.policy_aliases:
+            raise _no_dict_observations(type(self).__name__, "Dict observation spaces are not supported yet")
+        return super()._get_policy_from_name(policy_name)  # type: ignore[misc]
+
+
 class FiniteInputsMixin:
     """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (:func:`wrap_check_finite`), see module doc.
 
@@ -134,6 +164,7 @@ class FiniteInputsMixin:
     def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
         wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
         check_action_space(cls.__name__, wrapped.action_space)  # before SB3's own assert (one error type for all)
+        check_observation_space(cls.__name__, wrapped.observation_space)  # before SB3's "use MultiInputPolicy"
         return wrap_check_finite(wrapped)
 
 
@@ -279,7 +310,7 @@ class LearnChecksMixin:
         return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
 
 
-class InputChecksMixin(FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
+class InputChecksMixin(PolicyNameMixin, FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
     """All checks of this module; put it first in an algorithm's bases."""
 
 
