@@ -205,9 +205,11 @@ def test_invalid_options(small_model):
     for kwargs, match in [
         (dict(prioritized="td"), "prioritized must be one of"),
         (dict(prioritized="critic", batch_size=None), "prioritized='critic' .* needs an int batch_size"),
-        (dict(priority_alpha=-0.5), "priority_alpha"),
-        (dict(priority_beta=1.5), "priority_beta"),
-        (dict(priority_eps=0.0), "priority_eps"),
+        (dict(prioritized=dict(on="critic", alpha=-0.5)), "prioritized alpha"),
+        (dict(prioritized=dict(on="critic", beta=1.5)), "prioritized beta"),
+        (dict(prioritized=dict(on="critic", eps=0.0)), "prioritized eps"),
+        (dict(prioritized=dict(on="critic", gamma=0.5)), "prioritized must be one of .* or a dict with keys"),
+        (dict(prioritized=dict(on="all")), r"prioritized \(on\) must be one of"),
         (dict(actor_proximal=-1.0), "actor_proximal"),
         (dict(actor_proximal=float("nan")), "actor_proximal"),
     ]:
@@ -224,11 +226,12 @@ def test_option_defaults(small_model):
 
 
 def test_save_load_keeps_the_options(tmp_path, target_action_env, small_model):
-    kwargs = dict(prioritized="both", priority_alpha=0.7, priority_beta=0.5, priority_eps=0.01, actor_proximal=2.0)
-    model = small_model(batch_size=16, **kwargs).learn(20)
+    prioritized = dict(on="both", alpha=0.7, beta=0.5, eps=0.01)
+    model = small_model(batch_size=16, prioritized=prioritized, actor_proximal=2.0).learn(20)
     model.save(tmp_path / "model.zip")
     loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
-    assert {key: getattr(loaded, key) for key in kwargs} == kwargs
+    kept = ("prioritized", "priority_alpha", "priority_beta", "priority_eps", "actor_proximal")
+    assert tuple(getattr(loaded, key) for key in kept) == ("both", 0.7, 0.5, 0.01, 2.0)
     settings = loaded.make_updater().settings
     assert (settings.prioritized, settings.actor_proximal) == ("both", 2.0)
     loaded.learn(20, reset_num_timesteps=False)

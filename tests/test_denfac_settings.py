@@ -40,9 +40,6 @@ def test_every_argument_is_a_checked_setting_or_sb3_plumbing():
         (dict(reset_actor="yes"), "reset_actor must be True or False"),
         (dict(inverting_gradients=None), "inverting_gradients must be True or False"),
         (dict(bootstrap_on_timeout=0), "bootstrap_on_timeout must be True or False"),
-        (dict(adam_betas=(0.9,)), "adam_betas must be a pair"),
-        (dict(adam_betas=(0.9, 1.0)), r"adam_betas\[1\] must be"),
-        (dict(adam_eps=0.0), "adam_eps must be a number > 0"),
         (dict(max_grad_norm=-1.0), "max_grad_norm must be a number > 0 \\(or None\\)"),
         (dict(weighting="importance"), "weighting must be one of"),
         (dict(critic_target="max"), "critic_target must be one of"),
@@ -54,8 +51,9 @@ def test_settings_unchecked_before_are_refused_with_their_name(kwargs, match):
 
 
 def test_checked_values_are_stored_normalised():
-    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1"), adam_betas=[0.5, 0.99], max_grad_norm=None, critic_steps=5.0)
-    assert model.adam_betas == (0.5, 0.99) and model.max_grad_norm is None
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1"), prioritized="critic", max_grad_norm=None, critic_steps=5.0)
+    assert (model.prioritized, model.priority_alpha, model.priority_beta, model.priority_eps) == ("critic", 0.6, 0.4, 1e-3)
+    assert model.max_grad_norm is None
     assert model.critic_steps == 5 and isinstance(model.critic_steps, int)
     assert SoftDENFAC("MlpPolicy", gym.make("Pendulum-v1"), critic_steps=7.0).critic_steps == 7
 
@@ -63,8 +61,8 @@ def test_checked_values_are_stored_normalised():
 def test_settings_the_others_make_meaningless_are_named_in_a_warning():
     """A value other than the default for a setting the others switch off is ignored: the constructor says so."""
     env = gym.make("Pendulum-v1")
-    with pytest.warns(UserWarning, match=r"ignores critic_target='min', priority_alpha=0.7: critic_target needs"):
-        DENFAC("MlpPolicy", env, critic_target="min", priority_alpha=0.7, policy_kwargs=dict(n_critics=1))
+    with pytest.warns(UserWarning, match=r"ignores critic_target='min': critic_target needs n_critics > 1"):
+        DENFAC("MlpPolicy", env, critic_target="min", policy_kwargs=dict(n_critics=1))
     with pytest.warns(UserWarning, match=r"ignores target_noise_clip=0.3"):
         DENFAC("MlpPolicy", env, target_policy_noise=0.0, target_noise_clip=0.3)
     import warnings
@@ -73,6 +71,23 @@ def test_settings_the_others_make_meaningless_are_named_in_a_warning():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for kwargs in ({}, presets.PAPER, presets.DATA_EFFICIENT, dict(prioritized="critic", priority_alpha=0.7)):
+        for kwargs in ({}, presets.PAPER, presets.DATA_EFFICIENT, dict(prioritized=dict(on="critic", alpha=0.7))):
             DENFAC("MlpPolicy", env, **kwargs)
         SoftDENFAC("MlpPolicy", env, critic_target="min")
+
+
+def test_adam_settings_live_in_optimizer_kwargs():
+    """Adam's betas and eps are SB3's ``policy_kwargs=dict(optimizer_kwargs=...)``, not DENFAC arguments; the paper's
+    preset sets the authors' beta1 = 0 there, and files that saved them as DENFAC's ``adam_betas`` keep their values."""
+    from pathlib import Path
+
+    from sb3_denfac import presets
+
+    env = gym.make("Pendulum-v1")
+    with pytest.raises(TypeError, match="adam_betas"):
+        DENFAC("MlpPolicy", env, adam_betas=(0.0, 0.999))
+    for kwargs, betas in (({}, (0.9, 0.999)), (presets.PAPER, (0.0, 0.999))):
+        model = DENFAC("MlpPolicy", env, **kwargs)
+        assert all(net.optimizer.param_groups[0]["betas"] == betas for net in (model.actor, model.critic))
+    old = DENFAC.load(Path(__file__).parent / "data" / "denfac_v0.1_pendulum.zip", device="cpu")  # saved adam_betas
+    assert old.actor.optimizer.param_groups[0]["betas"] == (0.0, 0.999) and "adam_betas" not in vars(old)

@@ -17,6 +17,9 @@ from sb3_denfac.denfac import eager_steps
 from sb3_denfac.denfac.fast import FastUpdater, supported_networks
 from sb3_denfac.denfac.updaters import FitSettings
 
+#: Adam with beta1 = 0.9 over the paper preset's beta1 = 0 (``policy_kwargs.optimizer_kwargs``)
+ADAM = dict(betas=(0.9, 0.999))
+
 
 class MultiActionEnv(gym.Env):
     """4-d observations, 3-d actions, reward -|a - obs[:3] / 2|^2 (for the several-action code paths)."""
@@ -43,7 +46,7 @@ class MultiActionEnv(gym.Env):
         dict(reset_critic=True, weighting="retrace_next_state_quirk"),
         # mini-batches with a kept actor (beta1 = 0.9: with beta1 = 0 a rounding-sized actor gradient component, whose
         # sign depends on the CPU's float kernels, becomes an lr-sized step; on one Xeon a parameter differed by 46%)
-        dict(inverting_gradients=False, batch_size=32, reset_actor=False, adam_betas=(0.9, 0.999)),
+        dict(inverting_gradients=False, batch_size=32, reset_actor=False, policy_kwargs=dict(optimizer_kwargs=ADAM)),
         # several actions (the critic's action input as a matmul) and a deeper actor (BN backward through the input);
         # PyTorch's init: from N(0, 0.01) weights many actor gradient components are rounding-sized, and Adam with
         # beta1 = 0 turns their sign into lr-sized steps (the gradients themselves agree: test_eager_gradients_...)
@@ -57,11 +60,10 @@ class MultiActionEnv(gym.Env):
         dict(
             batch_size=32,
             reset_actor=False,
-            adam_betas=(0.9, 0.999),
-            policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), n_critics=3),
+            policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), n_critics=3, optimizer_kwargs=ADAM),
         ),
         # one critic and one actor step per iteration: each step's rows are exactly one mini-batch, with batch norm
-        dict(batch_size=16, critic_steps=1, actor_steps=1, actor_proximal=1.0, adam_betas=(0.9, 0.999)),
+        dict(batch_size=16, critic_steps=1, actor_steps=1, actor_proximal=1.0, policy_kwargs=dict(optimizer_kwargs=ADAM)),
         dict(
             actor_proximal=0.5,
             inverting_gradients=False,
@@ -276,7 +278,8 @@ def test_update_path_errors(make_denfac):
         make_denfac(update_path="turbo")
     with pytest.raises(ValueError, match="compiled.*removed"):
         make_denfac(update_path="compiled")
-    model = make_denfac(update_path="fast", policy_kwargs=dict(optimizer_class=th.optim.SGD))
+    sgd = dict(optimizer_class=th.optim.SGD, optimizer_kwargs={})  # without the paper preset's Adam betas
+    model = make_denfac(update_path="fast", policy_kwargs=sgd)
     with pytest.raises(ValueError, match="update_path=.fast. needs"):
         model.learn(60)
     # Adam with device-side step counts (fused / capturable): the fast path keeps counts on the host, so refuse it

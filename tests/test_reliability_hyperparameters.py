@@ -17,9 +17,9 @@ INVALID = {
         (dict(gamma=1.5), "gamma"),
         (dict(prioritized="td"), "prioritized"),
         (dict(prioritized="critic", batch_size=None), "prioritized"),
-        (dict(priority_alpha=-1.0), "priority_alpha"),
-        (dict(priority_beta=2.0), "priority_beta"),
-        (dict(priority_eps=0.0), "priority_eps"),
+        (dict(prioritized=dict(on="critic", alpha=-1.0)), "prioritized alpha"),
+        (dict(prioritized=dict(on="critic", beta=2.0)), "prioritized beta"),
+        (dict(prioritized=dict(on="critic", eps=0.0)), "prioritized eps"),
         (dict(actor_proximal=-0.1), "actor_proximal"),
     ],
     "ddpg": [

@@ -130,6 +130,13 @@ def upgrade_denfac(model: Any) -> None:
             f"this model was saved by a 0.5 development build with DENFAC's soft actor (ent_coef="
             f"{getattr(model, 'ent_coef', None)!r}), which is now its own algorithm: load it with SoftDENFAC.load(path)"
         )
+    if "adam_betas" in model.__dict__:  # 0.5 development builds and earlier: Adam's settings were DENFAC's arguments
+        betas, eps = model.__dict__.pop("adam_betas"), model.__dict__.pop("adam_eps", 1e-8)
+        if model.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
+            optimizer_kwargs = dict(model.policy_kwargs.get("optimizer_kwargs") or {})
+            optimizer_kwargs.setdefault("betas", tuple(betas))
+            optimizer_kwargs.setdefault("eps", eps)
+            model.policy_kwargs["optimizer_kwargs"] = optimizer_kwargs
     if "ent_coef" in model.__dict__ and model.ent_coef is None:  # the 0.5 development builds' deterministic actor
         del model.ent_coef, model.target_entropy
     for key in ("actor_learning_rate", "critic_learning_rate"):  # written by 0.1 and 0.2, now the algorithm's

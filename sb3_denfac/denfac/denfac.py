@@ -90,8 +90,6 @@ class DENFAC(
     :param weighting: "retrace" (c = min(1, pi_{k-1}(a|s)/pi_b(a|s))), "retrace_next_state_quirk" (the authors' code
         evaluates pi_{k-1} at s' instead of s) or "none" (c = 1)
     :param sigma: std of the truncated Gaussian exploration in the scaled action space (paper: 0.05)
-    :param adam_betas: Adam (beta1, beta2) (authors' Caffe solver: (0.0, 0.999))
-    :param adam_eps: Adam epsilon (authors: 1e-8)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
     :param update_path: the :class:`~sb3_denfac.denfac.updaters.Updater` of Algorithm 1: "fast"
@@ -101,10 +99,9 @@ class DENFAC(
         ``benchmarks/results/update_cost/``). Models saved with the removed "compiled" path load with "fast".
         Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
-        (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; needs an int ``batch_size``
-    :param priority_alpha: alpha in the priorities p_i = (|delta_i| + eps)^alpha, P(i) = p_i / sum p (0: uniform)
-    :param priority_beta: beta in the weights w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0: no correction)
-    :param priority_eps: eps in the priorities p_i (> 0: every transition can be drawn)
+        (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; or a dict ``on`` (one of those),
+        ``alpha`` in p_i = (|delta_i| + eps)^alpha (0.6), ``beta`` in w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0.4),
+        ``eps`` (1e-3); needs an int ``batch_size``
     :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
     :param update_to_data_ratio: rho, the compute dial (:mod:`~.options`): the update after an episode of n steps runs
@@ -162,15 +159,10 @@ class DENFAC(
         inverting_gradients: bool = True,
         weighting: str = "none",
         sigma: float = 0.1,
-        adam_betas: tuple[float, float] = (0.9, 0.999),
-        adam_eps: float = 1e-8,
         max_grad_norm: float | None = 10.0,
         bootstrap_on_timeout: bool = True,
         update_path: str = "auto",
-        prioritized: str = "none",
-        priority_alpha: float = 0.6,
-        priority_beta: float = 0.4,
-        priority_eps: float = 1e-3,
+        prioritized: str | dict[str, Any] = "none",
         actor_proximal: float = 1.0,
         update_to_data_ratio: float | None = None,
         target_policy_noise: float = 0.2,
@@ -239,11 +231,6 @@ class DENFAC(
         elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
             raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
         self.policy_kwargs.update(self._policy_settings())
-        optimizer_kwargs = dict(self.policy_kwargs.get("optimizer_kwargs") or {})
-        if self.policy_kwargs.get("optimizer_class", th.optim.Adam) in (th.optim.Adam, th.optim.AdamW):
-            optimizer_kwargs.setdefault("betas", self.adam_betas)
-            optimizer_kwargs.setdefault("eps", self.adam_eps)
-        self.policy_kwargs["optimizer_kwargs"] = optimizer_kwargs
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()

@@ -6,10 +6,10 @@ critic should sample D the same way) and a slower change of the policy. The auto
 (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`) implements both; the fast updater
 (:class:`~sb3_denfac.denfac.fast.FastUpdater`) implements the proximal actor, not the prioritised sampling.
 
-**Prioritised sampling of D** (``prioritized``; Schaul et al. 2016, "Prioritized Experience Replay", proportional
-variant). At every fitted iteration k, with the targets q_k of eq. (4), the TD errors of the whole buffer are
-recomputed with the eval-mode critic before it is fitted (DENFAC recomputes every target anyway, so no priority is
-stale)::
+**Prioritised sampling of D** (``prioritized``, one argument: :func:`check_prioritized`; Schaul et al. 2016,
+"Prioritized Experience Replay", proportional variant). At every fitted iteration k, with the targets q_k of eq. (4),
+the TD errors of the whole buffer are recomputed with the eval-mode critic before it is fitted (DENFAC recomputes
+every target anyway, so no priority is stale)::
 
     delta_i = q_i - Q_{k-1}(s_i, a_i),   p_i = (|delta_i| + eps)^alpha,   P(i) = p_i / sum_j p_j
     w_i = (N P(i))^-beta / max_j (N P(j))^-beta                         (importance correction, in (0, 1])
@@ -73,22 +73,32 @@ from sb3_denfac.common.inverting_gradients import invert_gradients
 PRIORITIZED = ("none", "critic", "both")
 
 
-def check_options(
-    prioritized: Any, alpha: Any, beta: Any, eps: Any, proximal: Any, batch_size: int | None
-) -> tuple[str, float, float, float, float]:
-    """The validated options (``prioritized``, ``priority_alpha``, ``priority_beta``, ``priority_eps``,
-    ``actor_proximal``), or a ValueError naming the argument."""
-    check_choice("prioritized", prioritized, PRIORITIZED)
-    alpha = check_number("priority_alpha", alpha, minimum=0.0, note=" (0: uniform)")
-    beta = check_number("priority_beta", beta, minimum=0.0, maximum=1.0)
-    eps = check_number("priority_eps", eps, minimum=0.0, exclusive_minimum=True)
-    proximal = check_number("actor_proximal", proximal, minimum=0.0, note=" (0: off)")
-    if prioritized != "none" and batch_size is None:
+#: ``prioritized`` as a mapping: where the priorities apply ("on") and the three constants of the module docstring.
+PRIORITY_DEFAULTS: dict[str, Any] = {"on": "none", "alpha": 0.6, "beta": 0.4, "eps": 1e-3}
+
+
+def check_prioritized(prioritized: Any, batch_size: int | None) -> tuple[str, float, float, float]:
+    """``prioritized``, one argument: "none", "critic" or "both" (with alpha 0.6, beta 0.4, eps 1e-3), or a mapping
+    ``dict(on="critic", alpha=..., beta=..., eps=...)`` (keys left out take those values); returns (on, alpha, beta,
+    eps) validated, or a ValueError naming the cause."""
+    if isinstance(prioritized, str) and prioritized in PRIORITIZED:
+        prioritized = {"on": prioritized}
+    if not isinstance(prioritized, dict) or set(prioritized) - set(PRIORITY_DEFAULTS):
         raise ValueError(
-            f"prioritized={prioritized!r} draws mini-batches from the priorities and needs an int batch_size, "
+            f"prioritized must be one of {PRIORITIZED} or a dict with keys among {list(PRIORITY_DEFAULTS)} (e.g. "
+            f'dict(on="critic", alpha=0.7)), got {prioritized!r}'
+        )
+    settings = {**PRIORITY_DEFAULTS, **prioritized}
+    on = check_choice("prioritized (on)", settings["on"], PRIORITIZED)
+    alpha = check_number("prioritized alpha", settings["alpha"], minimum=0.0, note=" (0: uniform)")
+    beta = check_number("prioritized beta", settings["beta"], minimum=0.0, maximum=1.0)
+    eps = check_number("prioritized eps", settings["eps"], minimum=0.0, exclusive_minimum=True)
+    if on != "none" and batch_size is None:
+        raise ValueError(
+            f"prioritized={on!r} draws mini-batches from the priorities and needs an int batch_size, "
             "got batch_size=None (full batch)"
         )
-    return prioritized, alpha, beta, eps, proximal
+    return on, alpha, beta, eps
 
 
 #: ``n_fitted_iterations``: K (an int), or with ``update_to_data_ratio`` the range (K_min, K_max) of K_e (None: no cap)

@@ -3,8 +3,7 @@
 ``DENFAC("MlpPolicy", env)`` is the library default: the constructor's defaults and :class:`~.policies.DENFACPolicy`'s
 (fitted iterations of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose
 mean makes the targets of eq. (4), with TD3's target policy smoothing of the next action, 64-64 networks without batch
-norm, no importance weights; why: docs/denfac.md, measurements:
-``benchmarks/results/ablation/``).
+norm, no importance weights; why, with the measurements: docs/denfac.md, "Design rationale").
 
 ``DENFAC("MlpPolicy", env, **PAPER)`` is Algorithm 1 with the paper's section 4 networks and Figure 5's common values:
 full-batch steps, the actor re-initialised at every fitted iteration and ascending eq. (5) as written (no proximal
@@ -22,7 +21,6 @@ from typing import Any
 #: Constructor arguments that turn the default DENFAC into the paper's Algorithm 1 (section 4, Figure 5).
 PAPER: dict[str, Any] = {
     "learning_rate": 0.1,
-    "adam_betas": (0.0, 0.999),
     "buffer_size": 3000,
     "batch_size": None,
     "n_fitted_iterations": 10,
@@ -35,7 +33,14 @@ PAPER: dict[str, Any] = {
     "target_policy_noise": 0.0,
     "bootstrap_bounds": False,
     "sigma": 0.05,
-    "policy_kwargs": {"net_arch": {"pi": [20], "qf": [50, 7]}, "batch_norm": True, "init": "paper", "n_critics": 1},
+    "policy_kwargs": {
+        "net_arch": {"pi": [20], "qf": [50, 7]},
+        "batch_norm": True,
+        "init": "paper",
+        "n_critics": 1,
+        # the authors' Caffe Adam: beta1 = 0 (with another optimizer_class, give optimizer_kwargs of its own)
+        "optimizer_kwargs": {"betas": (0.0, 0.999), "eps": 1e-8},
+    },
 }
 
 

@@ -23,7 +23,7 @@ from sb3_denfac.common.checks import (
 )
 from sb3_denfac.common.compat import check_denfac_arguments
 from sb3_denfac.common.threads import check_torch_threads
-from sb3_denfac.denfac.options import check_fitted_iterations, check_options
+from sb3_denfac.denfac.options import check_fitted_iterations, check_prioritized
 from sb3_denfac.denfac.policies import CRITIC_TARGETS
 from sb3_denfac.denfac.update_paths import UPDATE_PATHS
 
@@ -46,15 +46,10 @@ SETTINGS = (
     "inverting_gradients",
     "weighting",
     "sigma",
-    "adam_betas",
-    "adam_eps",
     "max_grad_norm",
     "bootstrap_on_timeout",
     "update_path",
     "prioritized",
-    "priority_alpha",
-    "priority_beta",
-    "priority_eps",
     "actor_proximal",
     "update_to_data_ratio",
     "target_policy_noise",
@@ -63,13 +58,6 @@ SETTINGS = (
     "bootstrap_bounds",
     "torch_threads",
 )
-
-
-def check_adam_betas(betas: Any) -> tuple[float, float]:
-    """Adam's (beta1, beta2), each in [0, 1)."""
-    if not isinstance(betas, tuple | list) or len(betas) != 2:
-        raise ValueError(f"adam_betas must be a pair (beta1, beta2), each in [0, 1), got {betas!r}")
-    return tuple(check_number(f"adam_betas[{i}]", b, minimum=0.0, maximum=1.0 - 1e-12) for i, b in enumerate(betas))  # type: ignore[return-value]
 
 
 def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
@@ -90,19 +78,19 @@ def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
         actor_steps=check_number("actor_steps (G)", a["actor_steps"], minimum=0, integer=True),
         weighting=check_choice("weighting", a["weighting"], WEIGHTINGS),
         sigma=check_sigma(a["sigma"]),
-        adam_betas=check_adam_betas(a["adam_betas"]),
-        adam_eps=check_number("adam_eps", a["adam_eps"], minimum=0.0, exclusive_minimum=True),
         max_grad_norm=check_positive("max_grad_norm", a["max_grad_norm"], none_ok=True),
         update_path=check_choice("update_path", a["update_path"], UPDATE_PATHS),
         target_policy_noise=check_number("target_policy_noise", a["target_policy_noise"], minimum=0.0, note=" (0: off)"),
         target_noise_clip=check_number("target_noise_clip", a["target_noise_clip"], minimum=0.0),
         critic_target=check_choice("critic_target", a["critic_target"], CRITIC_TARGETS),
         torch_threads=check_torch_threads(a["torch_threads"]),
+        actor_proximal=check_number("actor_proximal", a["actor_proximal"], minimum=0.0, note=" (0: off)"),
     )
     for name in ("reset_critic", "reset_actor", "inverting_gradients", "bootstrap_on_timeout", "bootstrap_bounds"):
         settings[name] = check_bool(name, a[name])
-    names = ("prioritized", "priority_alpha", "priority_beta", "priority_eps", "actor_proximal")
-    settings.update(zip(names, check_options(*(a[n] for n in names), a["batch_size"]), strict=True))
+    # one argument, kept as four attributes (what FitSettings reads, and what files of every version saved)
+    names = ("prioritized", "priority_alpha", "priority_beta", "priority_eps")
+    settings.update(zip(names, check_prioritized(a["prioritized"], a["batch_size"]), strict=True))
     return settings
 
 
@@ -113,9 +101,6 @@ def warn_ignored_settings(model: Any) -> list[str]:
     ignored = {
         "critic_target": model.policy_kwargs.get("n_critics", 2) == 1,  # one critic: its value, whatever combines it
         "target_noise_clip": model.target_policy_noise == 0,  # no noise to clip
-        "priority_alpha": model.prioritized == "none",
-        "priority_beta": model.prioritized == "none",
-        "priority_eps": model.prioritized == "none",
     }
     names = [
         name for name, unused in ignored.items() if unused and name in defaults and getattr(model, name) != defaults[name]
@@ -123,8 +108,7 @@ def warn_ignored_settings(model: Any) -> list[str]:
     if names:
         warnings.warn(
             f"{type(model).__name__} ignores {', '.join(f'{n}={getattr(model, n)!r}' for n in names)}: "
-            "critic_target needs n_critics > 1, target_noise_clip a target_policy_noise > 0, the priority_* settings "
-            "prioritized='critic' or 'both'",
+            "critic_target needs n_critics > 1, target_noise_clip a target_policy_noise > 0",
             UserWarning,
             stacklevel=3,
         )

@@ -45,7 +45,8 @@ class SoftDENFAC(DENFAC):
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value Q_{k-1}(s', a') to the range of discounted returns the
         rewards in D allow, before the entropy term (:mod:`~sb3_denfac.denfac.options`; default True, unlike DENFAC's:
         the soft targets' value estimates grow unbounded without it)
-    :param prioritized: "none" (default) or "critic" (the critic's mini-batches by TD error; the actor's stay uniform)
+    :param prioritized: "none" (default) or "critic" (the critic's mini-batches by TD error; the actor's stay uniform),
+        or DENFAC's dict with ``on="critic"``
     :param policy_kwargs: :class:`~.policies.SoftDENFACPolicy`'s: ``net_arch`` (default ``dict(pi=[64, 64],
         qf=[64, 64])``), ``n_critics`` (default 2), ``init`` and ``layer_norm`` (the critic's), ``activation_fn``; no
         batch norm (SAC's actor has none)
@@ -77,10 +78,7 @@ class SoftDENFAC(DENFAC):
         max_grad_norm: float | None = 10.0,
         bootstrap_on_timeout: bool = True,
         update_path: str = "auto",
-        prioritized: str = "none",
-        priority_alpha: float = 0.6,
-        priority_beta: float = 0.4,
-        priority_eps: float = 1e-3,
+        prioritized: str | dict[str, Any] = "none",
         update_to_data_ratio: float | None = None,
         critic_target: str = "mean",
         bootstrap_bounds: bool = True,
@@ -100,7 +98,7 @@ class SoftDENFAC(DENFAC):
         parse_ent_coef(ent_coef)  # a ValueError naming the accepted values
         if not (isinstance(target_entropy, str) and target_entropy == "auto"):
             check_target_entropy(target_entropy, None)  # type: ignore[arg-type]  # a float: no space needed
-        if prioritized == "both":
+        if (prioritized.get("on") if isinstance(prioritized, dict) else prioritized) == "both":
             raise ValueError(
                 "prioritized='both' draws the actor's mini-batches by TD error, which SoftDENFAC's actor steps do not "
                 "implement: use prioritized='critic'"
@@ -131,9 +129,6 @@ class SoftDENFAC(DENFAC):
             bootstrap_on_timeout=bootstrap_on_timeout,
             update_path=update_path,
             prioritized=prioritized,
-            priority_alpha=priority_alpha,
-            priority_beta=priority_beta,
-            priority_eps=priority_eps,
             update_to_data_ratio=update_to_data_ratio,
             critic_target=critic_target,
             bootstrap_bounds=bootstrap_bounds,
