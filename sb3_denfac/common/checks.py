@@ -19,9 +19,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import pathlib
 import zipfile
+from collections.abc import Iterator
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -177,6 +179,33 @@ def _open_for_read(path: Any) -> Any:
     return path
 
 
+@contextlib.contextmanager
+def _model_zip(path: Any) -> Iterator[zipfile.ZipFile | None]:
+    """The model zip at ``path`` as SB3's ``load`` finds it (None if there is no such file), open for reading; a file
+    object is read from where it stands and put back there."""
+    target = _open_for_read(path)
+    if isinstance(target, pathlib.Path) and not target.exists():
+        yield None
+        return
+    position = target.tell() if hasattr(target, "tell") else None
+    try:
+        with zipfile.ZipFile(target) as archive:
+            yield archive
+    finally:
+        if position is not None:
+            target.seek(position)
+
+
+def _deserialised(data_json: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    """Those of ``keys`` the ``data`` entry holds, deserialised as SB3 does (SB3's load deserialises the rest, with its
+    own warnings); {} if they cannot be (SB3's own error then tells)."""
+    try:
+        stored = json.loads(data_json)
+        return json_to_data(json.dumps({key: stored[key] for key in keys if key in stored}))
+    except Exception:  # noqa: BLE001 - an undecodable value is left to SB3's own error
+        return {}
+
+
 def check_model_zip(path: Any) -> Any:
     """Check that ``path`` is a complete SB3 model zip and return the ``policy_class`` it stores (None if unreadable).
 
@@ -184,14 +213,11 @@ def check_model_zip(path: Any) -> Any:
         model zip is a case of the second: ``zipfile`` then finds the zip of the torch ``.pth`` entry inside it, and
         SB3's own ``load`` only asserts "No data found in the saved file".
     """
-    target = _open_for_read(path)
-    if isinstance(target, pathlib.Path) and not target.exists():
-        return None  # SB3's load reports the missing file
-    position = target.tell() if hasattr(target, "tell") else None
     try:
-        with zipfile.ZipFile(target) as archive:
-            names = archive.namelist()
-            if "data" not in names:
+        with _model_zip(path) as archive:
+            if archive is None:
+                return None  # SB3's load reports the missing file
+            if "data" not in archive.namelist():
                 raise ValueError(
                     f"{path} is not a complete SB3 model zip (no 'data' entry): the file is truncated or corrupted, "
                     "or was not written by save()"
@@ -202,35 +228,18 @@ def check_model_zip(path: Any) -> Any:
             data_json = archive.read("data").decode()
     except zipfile.BadZipFile as error:
         raise ValueError(f"{path} is not a zip file: not an SB3 model, or a truncated or corrupted one") from error
-    finally:
-        if position is not None:
-            target.seek(position)
-    try:
-        stored = json.loads(data_json)
-        if "policy_class" not in stored:
-            return None
-        # Deserialise only the policy class (SB3's load deserialises the rest, with its own warnings).
-        return json_to_data(json.dumps({"policy_class": stored["policy_class"]})).get("policy_class")
-    except Exception:  # noqa: BLE001 - an undecodable class is left to SB3's own error
-        return None
+    return _deserialised(data_json, ("policy_class",)).get("policy_class")
 
 
-def stored_value(path: Any, key: str) -> Any:
-    """The value a model zip stores under ``key`` in its ``data`` entry, deserialised as SB3 does (None if the file or
-    the key cannot be read: SB3's own ``load`` then reports the problem)."""
-    target = _open_for_read(path)
-    if isinstance(target, pathlib.Path) and not target.exists():
-        return None
-    position = target.tell() if hasattr(target, "tell") else None
+def stored_values(path: Any, *keys: str) -> dict[str, Any]:
+    """The values a model zip stores under ``keys`` in its ``data`` entry, deserialised as SB3 does, read once; a key
+    the file lacks, or a file that cannot be read, is left out (SB3's own ``load`` then reports the problem)."""
     try:
-        with zipfile.ZipFile(target) as archive:
-            stored = json.loads(archive.read("data").decode())
-        return json_to_data(json.dumps({key: stored[key]})).get(key) if key in stored else None
+        with _model_zip(path) as archive:
+            data_json = None if archive is None else archive.read("data").decode()
     except Exception:  # noqa: BLE001 - an unreadable file is left to SB3's own error
-        return None
-    finally:
-        if position is not None:
-            target.seek(position)
+        return {}
+    return {} if data_json is None else _deserialised(data_json, keys)
 
 
 def check_model_file_exists(algorithm: str, path: Any) -> None:

@@ -12,7 +12,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.common.utils import update_learning_rate
 
-from sb3_denfac.common.checks import stored_value
+from sb3_denfac.common.checks import stored_values
 from sb3_denfac.common.docstrings import with_parent_params
 from sb3_denfac.denfac.denfac import DENFAC
 from sb3_denfac.denfac.options import FittedIterations, clip_bootstrap
@@ -148,12 +148,9 @@ class SoftDENFAC(DENFAC):
     def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
         """SB3's ``load``; also takes the files of the 0.5 development builds' ``DENFAC(..., ent_coef=...)``, this
         algorithm before it had its own class (a DENFACPolicy with ``soft_actor`` in its ``policy_kwargs``)."""
-        saved_kwargs = stored_value(path, "policy_kwargs")
-        if (
-            stored_value(path, "policy_class") is DENFACPolicy
-            and isinstance(saved_kwargs, dict)
-            and saved_kwargs.get("soft_actor")
-        ):
+        saved = stored_values(path, "policy_class", "policy_kwargs")
+        saved_kwargs = saved.get("policy_kwargs")
+        if saved.get("policy_class") is DENFACPolicy and isinstance(saved_kwargs, dict) and saved_kwargs.get("soft_actor"):
             kwargs["custom_objects"] = {"policy_class": SoftDENFACPolicy, **(kwargs.get("custom_objects") or {})}
         return super().load(path, *args, **kwargs)
 
