@@ -29,8 +29,8 @@ def _is_cuda(device: th.device | str) -> bool:
 def warn_about_device(algorithm: str, requested: Any, device: th.device, policy: th.nn.Module) -> bool:
     """Warn once per ``algorithm`` (module docstring) if CUDA was asked where there is none, or if ``requested`` was
     "auto", ``device`` is CUDA and ``policy`` is small; returns whether it warned."""
-    asked_cuda = not (isinstance(requested, str) and requested == "auto") and _is_cuda(requested)
-    if asked_cuda and not _is_cuda(device):
+    auto = isinstance(requested, str) and requested == "auto"
+    if not auto and _is_cuda(requested) and not _is_cuda(device):
         key = f"{algorithm}: no CUDA"
         if key in _warned:
             return False
@@ -42,7 +42,7 @@ def warn_about_device(algorithm: str, requested: Any, device: th.device, policy:
             stacklevel=3,
         )
         return True
-    if not (isinstance(requested, str) and requested == "auto") or not _is_cuda(device):
+    if not auto or not _is_cuda(device):
         return False
     n_parameters = sum(p.numel() for p in policy.parameters())
     if n_parameters >= SMALL_NETWORK_PARAMETERS or algorithm in _warned:
