@@ -266,3 +266,20 @@ def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_
 def test_step_budget_suite_refuses_an_episode_budget(tmp_path):
     with pytest.raises(ValueError, match="100000 env steps, not episodes"):
         runner.sweep(suite="mujoco100k", episodes=3, envs=["Hopper-v5"], results_dir=tmp_path, verbose=0)
+
+
+def test_slow_env_benchmark_runs_resumes_and_reports(tmp_path, capsys):
+    from benchmarks import slow_env
+
+    args = ["--envs", "Pendulum-v1", "--delays", "0.0005", "--seeds", "0", "--episodes", "2", "--output", str(tmp_path)]
+    slow_env.main([*args, "--rows", "denfac_n1", "denfac_n2_async", "sac_n4"])
+    runs = [json.loads(line) for line in (tmp_path / "runs.jsonl").read_text().splitlines()]
+    assert [r["row"] for r in runs] == ["denfac_n1", "denfac_n2_async", "sac_n4"]
+    for run in runs:
+        assert len(run["returns"]) >= 2 and run["evaluations"] and run["wall"] > 2 * 200 * 0.0005
+        assert run["evaluations"][-1]["episodes"] == len(run["returns"])
+    assert runs[0]["evaluations"][0]["episodes"] == 1 and runs[1]["evaluations"][0]["episodes"] == 2  # both envs at once
+    slow_env.main([*args, "--rows", "denfac_n1"])  # done already: skipped
+    assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 3
+    report = (tmp_path / "slow_env.md").read_text()
+    assert "| DENFAC, 2 envs, async |" in report and "predict() latency" in report and "0 of 1" in report

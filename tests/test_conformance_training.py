@@ -46,7 +46,7 @@ def test_learning_rate_schedule(name: str, episode_steps, make_model) -> None:
             assert group["lr"] <= 0.5e-3, "learning_rate schedule ignored"
 
 
-@pytest.mark.parametrize("name", ["ddpg", "nfac", "cacla"])  # not the algorithms that update after each episode
+@pytest.mark.parametrize("name", ["denfac", "soft_denfac", "ddpg", "nfac", "cacla"])  # not CMA-ES (one candidate at a time)
 def test_several_envs(name: str, episode_steps, make_env, make_model) -> None:
     from stable_baselines3.common.env_util import make_vec_env
 

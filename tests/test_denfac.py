@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import torch as th
 from scipy import stats
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 from torch import nn
 
@@ -177,8 +176,6 @@ def test_vecnormalize_callbacks_progress_bar(make_denfac, tmp_path):
 def test_errors():
     with pytest.raises(ValueError, match="Box"):
         DENFAC("MlpPolicy", "CartPole-v1")
-    with pytest.raises(ValueError, match="n_envs=2"):
-        DENFAC("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=2))
     for kwargs, name in [
         (dict(n_fitted_iterations=0), "n_fitted_iterations"),
         (dict(actor_steps=-1), "actor_steps"),

@@ -173,10 +173,12 @@ def test_small_network_warning_rules() -> None:
         assert warn_about_device("X1", "auto", th.device("cuda"), small)
 
 
-def test_denfac_with_several_envs_says_why_and_where_to_read(make_env) -> None:
+def test_denfac_buffer_too_small_for_an_episode_of_each_env_names_n_envs() -> None:
     from stable_baselines3.common.env_util import make_vec_env
 
     from sb3_denfac import DENFAC
 
-    with pytest.raises(ValueError, match=r"n_envs=2.*after every finished episode.*docs/conventions\.md"):
-        DENFAC("MlpPolicy", make_vec_env(make_env, n_envs=2))
+    # Pendulum's episodes last 200 steps; SB3 keeps buffer_size // n_envs steps of each env
+    with pytest.raises(ValueError, match=r"buffer_size \(D=600\) // n_envs=4 .*max_episode_steps=200.*of each env"):
+        DENFAC("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=4), buffer_size=600)
+    DENFAC("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=4), buffer_size=800)

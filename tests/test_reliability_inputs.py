@@ -20,8 +20,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecNormal
 
 from sb3_denfac.common.checks import FiniteCheckWrapper, UnsupportedSpaceError, wrap_check_finite
 
-#: Algorithms that learn from whole episodes of a single environment.
-EPISODE_WISE = ["denfac", "denfac_plain", "cmaes"]  # NFAC takes several envs (episodes end at different steps)
+#: Algorithms that learn from whole episodes of a single environment (DENFAC and NFAC take several envs).
+EPISODE_WISE = ["cmaes"]
 
 
 class DiscreteActionEnv(gym.Env):

@@ -147,10 +147,10 @@ class EpisodePerformanceCallback(BaseCallback):
 
 
 class UpdateStatsCallback(BaseCallback):
-    """Hands every end-of-episode update's statistics of DENFAC or SoftDENFAC (``model.last_update``, an
+    """Hands every end-of-episode update's statistics of DENFAC or SoftDENFAC (``model.last_updates``, each an
     :class:`~sb3_denfac.denfac.updaters.UpdateStats`: K_e, wall time, the last fitted iteration's targets and weights) to
-    ``on_update``, once per update: read when the next rollout starts (the update runs between two rollouts) and when
-    training ends (the last update)."""
+    ``on_update``, once per update, also when several envs' episodes end together: read when the next rollout starts
+    (the update runs between two rollouts) and when training ends (the last update)."""
 
     def __init__(self, on_update: Callable[[Any], None], verbose: int = 0):
         super().__init__(verbose)
@@ -158,10 +158,10 @@ class UpdateStatsCallback(BaseCallback):
         self._seen = 0
 
     def _read(self) -> None:
-        stats = getattr(self.model, "last_update", None)
-        if stats is not None and stats.n_updates > self._seen:
-            self._seen = stats.n_updates
-            self.on_update(stats)
+        for stats in getattr(self.model, "last_updates", []):  # several when several envs' episodes end together
+            if stats.n_updates > self._seen:
+                self._seen = stats.n_updates
+                self.on_update(stats)
 
     def _on_training_start(self) -> None:
         self._seen = self.model._n_updates  # a learn() that continues an earlier one

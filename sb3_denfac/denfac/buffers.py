@@ -17,7 +17,8 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 
 def check_holds_one_episode(env: VecEnv | None, buffer_size: int) -> None:
-    """A buffer shorter than one episode would never hold a whole episode: refuse it when the length is known."""
+    """A buffer shorter than one episode would never hold a whole episode (of each env): refuse it when the length is
+    known."""
     if env is None:
         return
     try:
@@ -25,10 +26,12 @@ def check_holds_one_episode(env: VecEnv | None, buffer_size: int) -> None:
     except (AttributeError, IndexError):
         spec = None
     max_steps = getattr(spec, "max_episode_steps", None)
-    if max_steps is not None and buffer_size < max_steps:
+    per_env = buffer_size // env.num_envs  # SB3's buffers keep buffer_size // n_envs steps of each env
+    if max_steps is not None and per_env < max_steps:
+        of_each = f" // n_envs={env.num_envs}" if env.num_envs > 1 else ""
         raise ValueError(
-            f"buffer_size (D={buffer_size}) is smaller than the environment's episode length "
-            f"(spec.max_episode_steps={max_steps}): the FIFO buffer must hold at least one whole episode"
+            f"buffer_size (D={buffer_size}){of_each} is smaller than the environment's episode length "
+            f"(spec.max_episode_steps={max_steps}): the FIFO buffer must hold at least one whole episode of each env"
         )
 
 

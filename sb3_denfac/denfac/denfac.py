@@ -24,11 +24,13 @@ from sb3_denfac.common.compat import (
     upgrade_denfac,
 )
 from sb3_denfac.common.device import warn_about_device
+from sb3_denfac.common.episode_ends import EpisodeEndsMixin
 from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
-from sb3_denfac.denfac.buffers import DENFACReplayBuffer, check_holds_one_episode
+from sb3_denfac.denfac.buffers import DENFACReplayBuffer, DENFACReplayBufferSamples, check_holds_one_episode
+from sb3_denfac.denfac.learner import AsyncUpdateMixin
 from sb3_denfac.denfac.options import (
     FittedIterations,
     bootstrap_range,
@@ -43,7 +45,7 @@ from sb3_denfac.denfac.update_paths import (
     check_update_path,
     make_updater,
 )
-from sb3_denfac.denfac.updaters import FitSettings, Updater, UpdateStats
+from sb3_denfac.denfac.updaters import FitResult, FitSettings, Updater, UpdateStats
 
 SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
@@ -52,6 +54,8 @@ class DENFAC(
     InputChecksMixin,
     TorchThreadsMixin,
     ProgressBarMixin,
+    AsyncUpdateMixin,
+    EpisodeEndsMixin,
     StopAtTotalTimestepsMixin,
     ActorCriticRatesMixin,
     TruncatedGaussianExplorationMixin,
@@ -70,7 +74,8 @@ class DENFAC(
     the paper, and the implementation's choices (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
 
     :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
-    :param env: the environment (a single env: updates are episode-wise)
+    :param env: the environment, or a VecEnv of several: an update after each env's finished episode
+        (:mod:`~sb3_denfac.common.episode_ends`)
     :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
         (:mod:`~sb3_denfac.common.learning_rates`; paper, Figure 5: alpha_a = alpha_c = 0.1)
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``
@@ -115,6 +120,9 @@ class DENFAC(
         their average) or "min" (clipped double Q, 0.4's default)
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
         (:mod:`~.options`; default False, paper: no bound)
+    :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
+        the last published policy plays (:mod:`~.learner`: what changes; default False: the update runs between
+        episodes, reproducible from the seed)
     :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
@@ -139,6 +147,9 @@ class DENFAC(
     replay_buffer: DENFACReplayBuffer
     #: the last update's statistics (:class:`UpdateStats`), None before the first
     last_update: UpdateStats | None = None
+    #: the last updates' statistics: the 2 n_envs last, at least all those since the previous env step (several envs'
+    #: episodes that end together, and with ``async_update`` the update published with them)
+    last_updates: list[UpdateStats] = []  # noqa: RUF012  (replaced, never mutated in place, by _record)
 
     def __init__(
         self,
@@ -169,6 +180,7 @@ class DENFAC(
         target_noise_clip: float = 0.5,
         critic_target: str = "mean",
         bootstrap_bounds: bool = False,
+        async_update: bool = False,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -211,12 +223,6 @@ class DENFAC(
             supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
             support_multi_env=True,  # checked below with a clear message
         )
-        if self.env is not None and self.n_envs != 1:
-            raise ValueError(
-                f"DENFAC needs a single environment, got n_envs={self.n_envs}: it runs one update (K fitted iterations "
-                "over the whole replay buffer) after every finished episode, and one update per n episodes ending "
-                "together learns less per episode; see docs/conventions.md, 'Several environments'"
-            )
         check_holds_one_episode(self.env, self.buffer_size)
         record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
@@ -260,30 +266,43 @@ class DENFAC(
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
-        """One update of Algorithm 1 over the whole replay buffer; ``gradient_steps`` is the number of steps of the
-        rollout just collected (SB3's ``gradient_steps=-1``), which sets K_e with ``update_to_data_ratio``."""
+        """The updates of Algorithm 1 over the whole replay buffer due now: one per finished episode
+        (:mod:`~sb3_denfac.common.episode_ends`; with one env ``gradient_steps`` is its length, SB3's
+        ``gradient_steps=-1``), each with K_e fitted iterations from its length and ``update_to_data_ratio``."""
+        lengths = self._finished_episodes(gradient_steps)
+        if not lengths:
+            return  # several envs: no episode ended at this step
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
         uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
-        self._update(fitted_iterations(self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio, gradient_steps))
+        k = self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio
+        self._run_updates([fitted_iterations(*k, n) for n in lengths])  # here or on the learner thread (learner.py)
 
-    def make_updater(self) -> Updater:
-        """The next update's updater: one of :attr:`updater_classes`, as ``update_path`` picks (:mod:`~.update_paths`)."""
-        return make_updater(self.policy, FitSettings.of(self), self.update_path, self.updater_classes).updater
+    def make_updater(self, policy: DENFACPolicy | None = None) -> Updater:
+        """The next update's updater of ``policy`` (default: the model's): one of :attr:`updater_classes`, as
+        ``update_path`` picks (:mod:`~.update_paths`)."""
+        policy = self.policy if policy is None else policy
+        return make_updater(policy, FitSettings.of(self), self.update_path, self.updater_classes).updater
 
     def _update(self, n_iterations: int | None = None) -> None:
-        """One end-of-episode update: Algorithm 1 with ``n_iterations`` (default K) fitted iterations over D."""
-        start = time.perf_counter()
+        """One end-of-episode update now, in this thread: Algorithm 1 with ``n_iterations`` (default K) fitted
+        iterations over D."""
         if n_iterations is None:
             if not isinstance(self.n_fitted_iterations, int):
                 raise ValueError("n_fitted_iterations is a range for update_to_data_ratio: pass _update the iterations")
             n_iterations = self.n_fitted_iterations
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
+        self._record([self._fit(self.make_updater(), data, n_iterations)])
+
+    def _fit(self, updater: Updater, data: DENFACReplayBufferSamples, n_iterations: int) -> FitResult:
+        """One end-of-episode update: Algorithm 1 with ``n_iterations`` fitted iterations over D (``data``, the
+        buffer's content), on the networks of ``updater``. Reads nothing else of the model but its settings, so that it
+        can run on copies in the learner thread (``async_update``)."""
+        start = time.perf_counter()
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
-        updater = self.make_updater()
         bounds = bootstrap_range(rewards, self.gamma) if self.bootstrap_bounds else None
         critic_loss = actor_objective = th.zeros(())
         for _ in range(n_iterations):
@@ -310,9 +329,19 @@ class DENFAC(
             else:
                 actor_objective = updater.fit_actor(obs[sample.actor_rows], sample.actor_batches)
         updater.finish()
-        self._n_updates += 1
-        self.last_update = UpdateStats(self._n_updates, n_iterations, time.perf_counter() - start, q_targets, weights, rows)
-        self._record_update(updater, critic_loss, actor_objective, clipped, obs.shape[0])
+        seconds = time.perf_counter() - start
+        n = obs.shape[0]
+        return FitResult(updater, n_iterations, seconds, q_targets, weights, rows, critic_loss, actor_objective, clipped, n)
+
+    def _record(self, fits: list[FitResult]) -> None:
+        """Count the updates ``fits`` (run back to back), keep their statistics (:attr:`last_update`,
+        :attr:`last_updates`) and log them; in the model's thread."""
+        for fit in fits:
+            self._n_updates += 1
+            stats = UpdateStats(self._n_updates, fit.fitted_iterations, fit.seconds, fit.q_targets, fit.weights, fit.rows)
+            self.last_update = stats
+            self.last_updates = [*self.last_updates, stats][-2 * self.n_envs :]
+            self._record_update(fit.updater, fit.critic_loss, fit.actor_objective, fit.clipped, fit.n_transitions)
 
     def _record_update(
         self, updater: Updater, critic_loss: th.Tensor, actor_objective: th.Tensor, clipped: th.Tensor, n: int
@@ -381,7 +410,7 @@ class DENFAC(
 
     def _excluded_save_params(self) -> list[str]:
         # gradient_steps: always -1 (_setup_model); a saved -1 would make sb3-denfac <= 0.4.0 update once per step
-        return [*super()._excluded_save_params(), "actor", "critic", "last_update", "gradient_steps"]
+        return [*super()._excluded_save_params(), "actor", "critic", "last_update", "last_updates", "gradient_steps"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "actor.optimizer", "critic.optimizer"], []

@@ -56,6 +56,7 @@ SETTINGS = (
     "target_noise_clip",
     "critic_target",
     "bootstrap_bounds",
+    "async_update",
     "torch_threads",
 )
 
@@ -86,7 +87,8 @@ def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
         torch_threads=check_torch_threads(a["torch_threads"]),
         actor_proximal=check_number("actor_proximal", a["actor_proximal"], minimum=0.0, note=" (0: off)"),
     )
-    for name in ("reset_critic", "reset_actor", "inverting_gradients", "bootstrap_on_timeout", "bootstrap_bounds"):
+    flags = ("reset_critic", "reset_actor", "inverting_gradients", "bootstrap_on_timeout", "bootstrap_bounds", "async_update")
+    for name in flags:
         settings[name] = check_bool(name, a[name])
     # one argument, kept as four attributes (what FitSettings reads, and what files of every version saved)
     names = ("prioritized", "priority_alpha", "priority_beta", "priority_eps")

@@ -1,6 +1,6 @@
 """The updater interface behind DENFAC's end-of-episode update, and its autograd implementation.
 
-``DENFAC._update`` is Algorithm 1 written once; everything it does to the networks goes through an :class:`Updater`:
+``DENFAC._fit`` is Algorithm 1 written once; everything it does to the networks goes through an :class:`Updater`:
 
 - ``actor(s)`` and ``critic(s, a)``: pi_{k-1} and Q_{k-1} in eval mode (running statistics), for the targets q_k and
   the importance weights c of eq. (4); with ``n_critics`` > 1 Q_{k-1} is the minimum over the critics (clipped double
@@ -89,6 +89,21 @@ class UpdateStats:
     q_targets: th.Tensor
     weights: th.Tensor
     rows: th.Tensor | None
+
+
+class FitResult(NamedTuple):
+    """One update's outcome, as ``DENFAC._fit`` returns it, for ``DENFAC._record`` (the logging keys, :class:`UpdateStats`)."""
+
+    updater: Updater
+    fitted_iterations: int
+    seconds: float
+    q_targets: th.Tensor
+    weights: th.Tensor
+    rows: th.Tensor | None
+    critic_loss: th.Tensor
+    actor_objective: th.Tensor
+    clipped: th.Tensor
+    n_transitions: int
 
 
 class IterationSample(NamedTuple):

@@ -84,6 +84,7 @@ class SoftDENFAC(DENFAC):
         bootstrap_bounds: bool = True,
         ent_coef: str | float = "auto",
         target_entropy: str | float = "auto",
+        async_update: bool = False,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -132,6 +133,7 @@ class SoftDENFAC(DENFAC):
             update_to_data_ratio=update_to_data_ratio,
             critic_target=critic_target,
             bootstrap_bounds=bootstrap_bounds,
+            async_update=async_update,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             stats_window_size=stats_window_size,
@@ -193,7 +195,7 @@ class SoftDENFAC(DENFAC):
         assert isinstance(updater, SoftActorFit)
         actions, log_prob = updater.sample_actor(next_obs)
         next_q, clipped = clip_bootstrap(updater.critic(next_obs, actions), bounds)
-        return next_q - self.policy.entropy_coefficient() * log_prob, clipped
+        return next_q - updater.policy.entropy_coefficient() * log_prob, clipped  # the fitted copy's alpha
 
     def _record_update(self, updater: Updater, *args: Any) -> None:
         """DENFAC's keys, and SB3 SAC's ``train/ent_coef`` and ``train/ent_coef_loss``."""

@@ -62,6 +62,9 @@ class SoftActorFit(Updater):
                 objective = -loss.detach()
             critic.requires_grad_(True)
             actor.set_training_mode(False)
+        # SB3's distribution caches the last step's tensors, and with them its graph: dropped, so that the policy keeps
+        # no graph between updates and can be copied (DENFAC's ``async_update`` fits a copy)
+        actor.action_dist.distribution = actor.action_dist.gaussian_actions = None
         return objective
 
 

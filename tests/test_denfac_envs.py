@@ -1,0 +1,134 @@
+"""DENFAC with several envs (``n_envs > 1``) and the asynchronous update (``async_update=True``)."""
+
+from __future__ import annotations
+
+import threading
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.common.callbacks import UpdateStatsCallback
+from sb3_denfac.denfac.learner import THREAD_NAME
+
+#: K_e = ceil(rho n / critic_steps) = n, the episode's length: the updates say which episodes they were for
+PER_STEP = dict(
+    update_to_data_ratio=1.0,
+    n_fitted_iterations=(1, None),
+    critic_steps=1,
+    actor_steps=1,
+    batch_size=8,
+    policy_kwargs=dict(net_arch=dict(pi=[4], qf=[4])),
+)
+
+
+def _two_lengths(first: int = 10, second: int = 15) -> DummyVecEnv:
+    return DummyVecEnv([lambda n=n: gym.make("Pendulum-v1", max_episode_steps=n) for n in (first, second)])
+
+
+def _learner_threads() -> list[str]:
+    return [t.name for t in threading.enumerate() if t.name.startswith(THREAD_NAME)]
+
+
+@pytest.mark.parametrize("async_update", [False, True])
+def test_each_finished_episode_of_each_env_gets_its_own_update(async_update: bool) -> None:
+    """Envs of 10- and 15-step episodes, 30 VecEnv steps: episodes end at steps 10, 15, 20 and 30 (both); with
+    learning_starts=25 (num_timesteps counts both envs) the one at step 10 gets none, as with one env."""
+    seen: list[int] = []
+    model = DENFAC("MlpPolicy", _two_lengths(), learning_starts=25, seed=0, async_update=async_update, **PER_STEP)
+    model.learn(60, callback=UpdateStatsCallback(lambda stats: seen.append(stats.fitted_iterations)))
+    assert seen == [15, 10, 10, 15]  # one update each, K_e from its own episode's length; the two at step 30 back to back
+    assert model._n_updates == 4 and [stats.n_updates for stats in model.last_updates] == [1, 2, 3, 4]  # 2 n_envs kept
+    assert model.num_timesteps == 60 and model.replay_buffer.size() == 30  # 30 steps of each env
+    assert not _learner_threads()
+
+
+def test_a_budget_inside_episodes_updates_on_their_steps_so_far_and_continues_them() -> None:
+    seen: list[int] = []
+    callback = UpdateStatsCallback(lambda stats: seen.append(stats.fitted_iterations))
+    model = DENFAC("MlpPolicy", _two_lengths(), seed=0, **PER_STEP).learn(14, callback=callback)  # 7 steps of each
+    assert seen == [7, 7]
+    # 5 more steps each: env 0's episode ends at its 10th step (3 since the budget), then the budget again (2 and 5)
+    model.learn(10, callback=callback, reset_num_timesteps=False)
+    assert seen == [7, 7, 3, 2, 5]
+
+
+def test_subprocess_envs_train_save_and_load(tmp_path) -> None:
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0, vec_env_cls=SubprocVecEnv, env_kwargs=dict(max_episode_steps=20))
+    try:
+        model = DENFAC("MlpPolicy", env, seed=0, **PER_STEP).learn(80)
+        assert model._n_updates == 4 and model.replay_buffer.size() == 40
+        model.save(tmp_path / "model.zip")
+        loaded = DENFAC.load(tmp_path / "model.zip", env=env)
+        obs = env.reset()
+        np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+        loaded.learn(40, reset_num_timesteps=False)  # goes on from the file with the same envs
+        assert loaded._n_updates == 6
+    finally:
+        env.close()
+
+
+def test_async_update_plays_the_last_published_policy_and_leaves_no_thread() -> None:
+    played: dict[int, list] = {}  # policy object -> its parameters at every step it played
+
+    class Watch(BaseCallback):
+        def _on_step(self) -> bool:
+            policy = self.model.policy
+            played.setdefault(id(policy), [policy]).append(th.cat([p.detach().flatten().clone() for p in policy.parameters()]))
+            return True
+
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps=20), seed=0, async_update=True, **PER_STEP)
+    first = model.policy
+    model.learn(100, callback=Watch())
+    assert model._n_updates == 5 and model.last_update is not None and model.last_update.fitted_iterations == 20
+    assert model.policy is not first and id(first) in played  # each update's copy became the model's policy
+    assert len(played) >= 2  # (fits slower than an episode are published at the next episode end, then played)
+    for _, *parameters in played.values():  # a policy that plays is never written: the learner fits a copy
+        assert all(th.equal(parameters[0], p) for p in parameters[1:])
+    assert not _learner_threads()
+    assert model.async_update is True
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
+def test_async_update_keeps_the_running_update_on_an_exception(error: type[BaseException]) -> None:
+    class Stop(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps == 21:  # the step after the first episode's end: its update is running
+                raise error("stop")
+            return True
+
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps=20), seed=0, async_update=True, **PER_STEP)
+    with pytest.raises(error):
+        model.learn(200, callback=Stop())
+    assert model._n_updates == 1  # the update in flight was waited for and kept
+    assert not _learner_threads()
+
+
+def test_async_update_save_during_learn_loads(tmp_path) -> None:
+    env = gym.make("Pendulum-v1", max_episode_steps=20)
+    model = DENFAC("MlpPolicy", env, seed=0, async_update=True, **PER_STEP)
+    model.learn(85, callback=CheckpointCallback(save_freq=21, save_path=str(tmp_path)))  # a step after each episode end
+    files = sorted(tmp_path.glob("*.zip"))
+    assert len(files) == 4
+    loaded = DENFAC.load(files[-1], env=env)
+    assert loaded.async_update is True
+    loaded.learn(20)
+    assert not _learner_threads()
+
+
+@pytest.mark.parametrize("algo", [DENFAC, SoftDENFAC])
+def test_several_envs_with_async_update_learn_pendulum(algo) -> None:
+    """4 envs, an asynchronous update after each env's episode: 24 episodes of Pendulum-v1 lift the greedy return far
+    above the untrained policy's (about -1200)."""
+    model = algo("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=4, seed=0), seed=0, async_update=True)
+    before, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
+    model.learn(24 * 200)
+    after, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
+    assert model._n_updates == 24
+    assert after > -600 and after > before + 400, (before, after)
