@@ -146,10 +146,10 @@ def make_env(episode: int = EPISODE) -> gym.Env:
     return gym.make("Pendulum-v1", max_episode_steps=episode)
 
 
-def make_model(name: str, env: Any = None, **overrides: Any) -> BaseAlgorithm:
+def make_model(name: str, env: Any = None, policy: str = "MlpPolicy", **overrides: Any) -> BaseAlgorithm:
     kwargs = deepcopy(TINY_KWARGS[name])
     kwargs.update(overrides)
-    return algo_class(name)("MlpPolicy", make_env() if env is None else env, **kwargs)
+    return algo_class(name)(policy, make_env() if env is None else env, **kwargs)
 
 
 def sample_observations(space: spaces.Space, n: int = 10, seed: int = 0) -> np.ndarray:

@@ -109,13 +109,23 @@ GOAL_SPACE = spaces.Dict(
 
 
 @pytest.mark.algorithms("all")
-def test_dict_observations_are_refused_with_the_way_around(name: str, episode_steps, algo_class, make_model) -> None:
-    """A goal-conditioned env's Dict observation: "MlpPolicy" and "MultiInputPolicy" are both refused with an error that
-    names the cause and the way around (SB3 said "use MultiInputPolicy", then "Policy MultiInputPolicy unknown": a dead
-    end); flattened, the same env trains."""
+def test_dict_observations_get_a_policy_or_a_refusal_with_the_way_around(
+    name: str, episode_steps, algo_class, make_model
+) -> None:
+    """A goal-conditioned env's Dict observation: DENFAC and SoftDENFAC take it with "MultiInputPolicy" (and SB3 tells
+    "MlpPolicy" to use it); the others refuse both names with an error that names the cause and the way around (SB3
+    said "use MultiInputPolicy", then "Policy MultiInputPolicy unknown": a dead end); flattened, the same env trains."""
     env = gym.wrappers.TimeLimit(SpacesEnv(GOAL_SPACE, spaces.Box(-1.0, 1.0, shape=(2,))), episode_steps)
+    if "MultiInputPolicy" in algo_class(name).policy_aliases:
+        with pytest.raises(ValueError, match="You must use `MultiInputPolicy`"):
+            algo_class(name)("MlpPolicy", env)
+        model = make_model(name, env=env, policy="MultiInputPolicy")
+        assert model.policy_class.__name__ == "MultiInputPolicy"
+        model.learn(2 * episode_steps)
+        assert model.predict(GOAL_SPACE.sample())[0].shape == (2,)
+        return
     for policy, cause in (("MlpPolicy", "the env's observation space is a Dict with keys"), ("MultiInputPolicy", "Dict")):
-        with pytest.raises(UnsupportedSpaceError, match=rf"no MultiInputPolicy: {cause}.*FlattenObservation"):
+        with pytest.raises(UnsupportedSpaceError, match=rf"no MultiInputPolicy: {cause}.*FlattenObservation.*DENFAC"):
             algo_class(name)(policy, env)
     flat = gym.wrappers.FlattenObservation(env)
     model = make_model(name, env=flat)

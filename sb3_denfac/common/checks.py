@@ -125,7 +125,7 @@ def check_action_space(algorithm: str, space: spaces.Space) -> None:
         raise UnsupportedSpaceError(f"{algorithm} needs finite action bounds (actions are scaled to [-1, 1]), got {space}")
 
 
-#: SB3's policy name for Dict observations, which no algorithm of this package implements yet.
+#: SB3's policy name for Dict observations, which DENFAC and SoftDENFAC implement.
 MULTI_INPUT_POLICY = "MultiInputPolicy"
 
 
@@ -133,12 +133,15 @@ def _no_dict_observations(algorithm: str, what: str) -> UnsupportedSpaceError:
     return UnsupportedSpaceError(
         f"{algorithm} has no {MULTI_INPUT_POLICY}: {what}. Its policies take Box, Discrete, MultiDiscrete or MultiBinary "
         "observations; flatten a Dict observation into one vector with gymnasium.wrappers.FlattenObservation(env) "
-        "and use 'MlpPolicy' (goal relabelling with HerReplayBuffer needs the Dict and is not supported yet)"
+        "and use 'MlpPolicy', or use DENFAC or SoftDENFAC, which take it with 'MultiInputPolicy' (and HerReplayBuffer)"
     )
 
 
-def check_observation_space(algorithm: str, space: spaces.Space) -> None:
-    """Raise an :class:`UnsupportedSpaceError` for a Dict (or Tuple) observation space, naming the way around it."""
+def check_observation_space(algorithm: str, space: spaces.Space, multi_input: bool = False) -> None:
+    """Raise an :class:`UnsupportedSpaceError` for a Dict (or Tuple) observation space, naming the way around it; a
+    Dict is taken by an algorithm with a ``MultiInputPolicy`` (``multi_input``)."""
+    if multi_input and isinstance(space, spaces.Dict):
+        return
     if isinstance(space, spaces.Dict | spaces.Tuple):
         keys = f" with keys {list(space.spaces)}" if isinstance(space, spaces.Dict) else ""
         raise _no_dict_observations(algorithm, f"the env's observation space is a {type(space).__name__}{keys}")
@@ -166,7 +169,8 @@ class FiniteInputsMixin:
     def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
         wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
         check_action_space(cls.__name__, wrapped.action_space)  # before SB3's own assert (one error type for all)
-        check_observation_space(cls.__name__, wrapped.observation_space)  # before SB3's "use MultiInputPolicy"
+        multi_input = MULTI_INPUT_POLICY in getattr(cls, "policy_aliases", {})
+        check_observation_space(cls.__name__, wrapped.observation_space, multi_input)  # before SB3's "use MultiInputPolicy"
         return wrap_check_finite(wrapped)
 
 

@@ -1,8 +1,14 @@
-"""Replay buffer of DENFAC: SB3's FIFO ``ReplayBuffer`` that also stores the behaviour mean mu_b(s) of each transition.
+"""Replay buffers of DENFAC: SB3's FIFO buffers that also store the behaviour mean mu_b(s) of each transition.
 
 Algorithm 1 weights every sample by c = min(1, pi_{k-1}(a|s) / pi_b(a|s)), where pi_b is the truncated Gaussian that
 played ``a``. The behaviour density is fully described by its mean mu_b(s) (sigma and the bounds are fixed), so the
 buffer keeps mu_b(s) next to ``a``, in the same [-1, 1] scaled action space, as the authors' ``pure_a``.
+
+:class:`BehaviourMeansBuffer` adds that to any SB3 buffer: :class:`DENFACReplayBuffer` (SB3's ``ReplayBuffer``, vector
+observations), :class:`DENFACDictReplayBuffer` (``DictReplayBuffer``, Dict observations, ``MultiInputPolicy``) and
+:class:`~sb3_denfac.denfac.her.DENFACHerReplayBuffer` (``HerReplayBuffer``). Each gives Algorithm 1 its whole content
+with :meth:`BehaviourMeansBuffer.all_samples`; :func:`take` and :func:`n_rows` read rows of its observations, tensors or
+dicts of tensors alike.
 """
 
 from __future__ import annotations
@@ -11,8 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
-from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.buffers import DictReplayBuffer, ReplayBuffer
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 
@@ -35,10 +40,23 @@ def check_holds_one_episode(env: VecEnv | None, buffer_size: int) -> None:
         )
 
 
+def take(x: th.Tensor | dict[str, th.Tensor], rows: th.Tensor | None) -> Any:
+    """Rows ``rows`` of a tensor or of each tensor of a dict (Dict observations); all of it for ``rows`` None."""
+    if rows is None:
+        return x
+    return {key: value[rows] for key, value in x.items()} if isinstance(x, dict) else x[rows]
+
+
+def n_rows(x: th.Tensor | dict[str, th.Tensor]) -> int:
+    """The number of rows of a tensor or of a dict of tensors."""
+    return int(next(iter(x.values())).shape[0]) if isinstance(x, dict) else int(x.shape[0])
+
+
 class DENFACReplayBufferSamples(NamedTuple):
-    observations: th.Tensor
+    #: a tensor, or a dict of tensors for Dict observations
+    observations: Any
     actions: th.Tensor
-    next_observations: th.Tensor
+    next_observations: Any
     #: 1 on true terminal states only (time-limit truncations removed, as SB3's ``ReplayBufferSamples``)
     dones: th.Tensor
     rewards: th.Tensor
@@ -48,8 +66,8 @@ class DENFACReplayBufferSamples(NamedTuple):
     timeouts: th.Tensor
 
 
-class DENFACReplayBuffer(ReplayBuffer):
-    """FIFO replay buffer D of Algorithm 1 with an extra ``behaviour_means`` array.
+class BehaviourMeansBuffer:
+    """Mixed in before an SB3 buffer: the FIFO replay buffer D of Algorithm 1 with an extra ``behaviour_means`` array.
 
     ``add`` takes the behaviour means either as the keyword ``behaviour_means`` or, when called through SB3's
     ``_store_transition`` (which does not know about them), from :meth:`stage_behaviour_means` called just before.
@@ -57,28 +75,16 @@ class DENFACReplayBuffer(ReplayBuffer):
     """
 
     behaviour_means: np.ndarray
+    buffer_size: int
+    n_envs: int
+    action_dim: int
+    pos: int
+    timeouts: np.ndarray
 
-    def __init__(
-        self,
-        buffer_size: int,
-        observation_space: spaces.Space,
-        action_space: spaces.Space,
-        device: th.device | str = "auto",
-        n_envs: int = 1,
-        optimize_memory_usage: bool = False,
-        handle_timeout_termination: bool = True,
-    ):
+    def __init__(self, *args: Any, optimize_memory_usage: bool = False, **kwargs: Any):
         if optimize_memory_usage:
-            raise ValueError("DENFACReplayBuffer does not support optimize_memory_usage=True")
-        super().__init__(
-            buffer_size,
-            observation_space,
-            action_space,
-            device=device,
-            n_envs=n_envs,
-            optimize_memory_usage=False,
-            handle_timeout_termination=handle_timeout_termination,
-        )
+            raise ValueError(f"{type(self).__name__} does not support optimize_memory_usage=True")
+        super().__init__(*args, **kwargs)  # type: ignore[call-arg]
         self.behaviour_means = np.zeros((self.buffer_size, self.n_envs, self.action_dim), dtype=np.float32)
         self._staged_behaviour_means: np.ndarray | None = None
 
@@ -88,8 +94,8 @@ class DENFACReplayBuffer(ReplayBuffer):
 
     def add(
         self,
-        obs: np.ndarray,
-        next_obs: np.ndarray,
+        obs: Any,
+        next_obs: Any,
         action: np.ndarray,
         reward: np.ndarray,
         done: np.ndarray,
@@ -101,32 +107,55 @@ class DENFACReplayBuffer(ReplayBuffer):
             self._staged_behaviour_means = None
         if behaviour_means is None:
             raise ValueError(
-                "DENFACReplayBuffer.add needs the behaviour means mu_b(s): pass behaviour_means=... "
+                f"{type(self).__name__}.add needs the behaviour means mu_b(s): pass behaviour_means=... "
                 "or call stage_behaviour_means() before add()"
             )
         self.behaviour_means[self.pos] = np.asarray(behaviour_means, dtype=np.float32).reshape((self.n_envs, self.action_dim))
-        super().add(obs, next_obs, action, reward, done, infos)
+        super().add(obs, next_obs, action, reward, done, infos)  # type: ignore[misc]
 
     def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> DENFACReplayBufferSamples:  # type: ignore[override]
         env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
         return self._gather(batch_inds, env_indices, env)
 
     def _gather(self, batch_inds: np.ndarray, env_indices: np.ndarray, env: VecNormalize | None) -> DENFACReplayBufferSamples:
+        """Transitions (``batch_inds``, ``env_indices``) as :class:`DENFACReplayBufferSamples`."""
         timeouts = self.timeouts[batch_inds, env_indices]
         data = (
-            self._normalize_obs(self.observations[batch_inds, env_indices, :], env),
-            self.actions[batch_inds, env_indices, :],
-            self._normalize_obs(self.next_observations[batch_inds, env_indices, :], env),
-            (self.dones[batch_inds, env_indices] * (1 - timeouts)).reshape(-1, 1),
-            self._normalize_reward(self.rewards[batch_inds, env_indices].reshape(-1, 1), env),
+            self.actions[batch_inds, env_indices, :],  # type: ignore[attr-defined]
+            (self.dones[batch_inds, env_indices] * (1 - timeouts)).reshape(-1, 1),  # type: ignore[attr-defined]
+            self._normalize_reward(self.rewards[batch_inds, env_indices].reshape(-1, 1), env),  # type: ignore[attr-defined]
             self.behaviour_means[batch_inds, env_indices, :],
             timeouts.reshape(-1, 1),
         )
-        return DENFACReplayBufferSamples(*tuple(self.to_torch(np.asarray(x, dtype=np.float32)) for x in data))
+        actions, dones, rewards, means, timeouts_ = (self._tensor(x) for x in data)
+        obs, next_obs = (
+            self._observations(which, batch_inds, env_indices, env) for which in ("observations", "next_observations")
+        )
+        return DENFACReplayBufferSamples(obs, actions, next_obs, dones, rewards, means, timeouts_)
+
+    def _observations(self, which: str, batch_inds: np.ndarray, env_indices: np.ndarray, env: VecNormalize | None) -> Any:
+        stored = getattr(self, which)
+        if isinstance(stored, dict):
+            normalised = self._normalize_obs({key: obs[batch_inds, env_indices] for key, obs in stored.items()}, env)  # type: ignore[attr-defined]
+            return {key: self._tensor(value) for key, value in normalised.items()}
+        return self._tensor(self._normalize_obs(stored[batch_inds, env_indices, :], env))  # type: ignore[attr-defined]
+
+    def _tensor(self, x: np.ndarray) -> th.Tensor:
+        return self.to_torch(np.asarray(x, dtype=np.float32))  # type: ignore[attr-defined]
+
+    def _indices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(step, env) indices of every stored transition, in the order :meth:`all_samples` returns them."""
+        size = self.size()  # type: ignore[attr-defined]
+        return np.repeat(np.arange(size), self.n_envs), np.tile(np.arange(self.n_envs), size)
 
     def all_samples(self, env: VecNormalize | None = None) -> DENFACReplayBufferSamples:
         """The whole buffer content (every stored transition of every env), for Algorithm 1's full-batch update."""
-        size = self.size()
-        batch_inds = np.repeat(np.arange(size), self.n_envs)
-        env_indices = np.tile(np.arange(self.n_envs), size)
-        return self._gather(batch_inds, env_indices, env)
+        return self._gather(*self._indices(), env)
+
+
+class DENFACReplayBuffer(BehaviourMeansBuffer, ReplayBuffer):
+    """D with vector observations: SB3's ``ReplayBuffer`` and each transition's behaviour mean."""
+
+
+class DENFACDictReplayBuffer(BehaviourMeansBuffer, DictReplayBuffer):
+    """D with Dict observations (``MultiInputPolicy``): SB3's ``DictReplayBuffer`` and each transition's behaviour mean."""

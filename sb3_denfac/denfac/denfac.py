@@ -7,11 +7,13 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
@@ -29,7 +31,16 @@ from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, beh
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.threads import TorchThreadsMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
-from sb3_denfac.denfac.buffers import DENFACReplayBuffer, DENFACReplayBufferSamples, check_holds_one_episode
+from sb3_denfac.denfac.buffers import (
+    BehaviourMeansBuffer,
+    DENFACDictReplayBuffer,
+    DENFACReplayBuffer,
+    DENFACReplayBufferSamples,
+    check_holds_one_episode,
+    n_rows,
+    take,
+)
+from sb3_denfac.denfac.her import DENFACHerReplayBuffer, check_her
 from sb3_denfac.denfac.learner import AsyncUpdateMixin
 from sb3_denfac.denfac.options import (
     FittedIterations,
@@ -37,7 +48,7 @@ from sb3_denfac.denfac.options import (
     clip_bootstrap,
     fitted_iterations,
 )
-from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy
+from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
 from sb3_denfac.denfac.settings import SETTINGS, check_settings, warn_ignored_settings
 from sb3_denfac.denfac.update_paths import (
     DENFAC_UPDATERS,
@@ -73,7 +84,8 @@ class DENFAC(
     env, **presets.PAPER)`` is Algorithm 1 as written (:mod:`~sb3_denfac.denfac.presets`). Why the default differs from
     the paper, and the implementation's choices (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
 
-    :param policy: the policy model ("MlpPolicy" or a :class:`DENFACPolicy` subclass)
+    :param policy: the policy model ("MlpPolicy"; "MultiInputPolicy" for Dict observations, SB3's CombinedExtractor;
+        or a :class:`DENFACPolicy` subclass)
     :param env: the environment, or a VecEnv of several: an update after each env's finished episode
         (:mod:`~sb3_denfac.common.episode_ends`)
     :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
@@ -123,7 +135,9 @@ class DENFAC(
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
         the last published policy plays (:mod:`~.learner`: what changes; default False: the update runs between
         episodes, reproducible from the seed)
-    :param replay_buffer_class: replay buffer class (must subclass :class:`DENFACReplayBuffer`)
+    :param replay_buffer_class: D's class: None (:class:`DENFACReplayBuffer`, or :class:`DENFACDictReplayBuffer` for
+        Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals: :mod:`~.her`, with ``weighting="none"``) or a
+        subclass of one of them
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
@@ -139,7 +153,7 @@ class DENFAC(
     :param _init_setup_model: whether to build the networks at construction
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy}
     #: the two implementations of the update that ``update_path`` picks from (:mod:`~.update_paths`); a subclass that
     #: fits its networks otherwise names its own (:class:`~sb3_denfac.soft_denfac.SoftDENFAC`)
     updater_classes: ClassVar[UpdaterClasses] = DENFAC_UPDATERS
@@ -232,15 +246,28 @@ class DENFAC(
 
     def _setup_model(self) -> None:
         upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings
-        if self.replay_buffer_class is None:
-            self.replay_buffer_class = DENFACReplayBuffer
-        elif not issubclass(self.replay_buffer_class, DENFACReplayBuffer):
-            raise ValueError(f"replay_buffer_class must subclass DENFACReplayBuffer, got {self.replay_buffer_class}")
+        self.replay_buffer_class = self._buffer_class(self.replay_buffer_class)
         self.policy_kwargs.update(self._policy_settings())
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()
         check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
+
+    def _buffer_class(self, given: type[ReplayBuffer] | None) -> type[ReplayBuffer]:
+        """D's class: DENFAC's buffer for the observations (Dict ones: :class:`DENFACDictReplayBuffer`), SB3's
+        ``HerReplayBuffer`` taken as :class:`~.her.DENFACHerReplayBuffer`, or a subclass of one of them."""
+        if given is None:
+            return DENFACDictReplayBuffer if isinstance(self.observation_space, spaces.Dict) else DENFACReplayBuffer
+        if given is HerReplayBuffer:
+            given = DENFACHerReplayBuffer  # the same arguments (n_sampled_goal, goal_selection_strategy, ...)
+        if not issubclass(given, BehaviourMeansBuffer):
+            raise ValueError(
+                f"replay_buffer_class must be SB3's HerReplayBuffer or subclass DENFACReplayBuffer, DENFACDictReplayBuffer "
+                f"or DENFACHerReplayBuffer (they keep each transition's behaviour mean), got {given}"
+            )
+        if issubclass(given, HerReplayBuffer):
+            check_her(type(self).__name__, self.weighting)
+        return given
 
     def _policy_settings(self) -> dict[str, Any]:
         """The algorithm's settings its policy is built with (on top of ``policy_kwargs``): the exploration's sigma."""
@@ -259,7 +286,7 @@ class DENFAC(
         return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
 
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
-        assert isinstance(replay_buffer, DENFACReplayBuffer)
+        assert isinstance(replay_buffer, BehaviourMeansBuffer)
         # D stores mu_b(s) clamped to [-1 - 3 sigma, 1 + 3 sigma], as the authors' code (NaN warm-up rows stay NaN)
         replay_buffer.stage_behaviour_means(clamp_mean(self._last_behaviour_mean, -1.0, 1.0, self.sigma))
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)
@@ -308,11 +335,9 @@ class DENFAC(
         for _ in range(n_iterations):
             # With mini-batches, the iteration's batches are drawn first: q_k and c are then needed on their rows only
             # (the same values as over all of D). ``rows`` None: the whole buffer.
-            sample = updater.iteration_sample(obs.shape[0])
+            sample = updater.iteration_sample(n_rows(rewards))
             rows = None if sample is None else sample.critic_rows
-            o, a, o2, r, done, lp_b = (
-                (x if rows is None else x[rows]) for x in (obs, actions, next_obs, rewards, terminal, log_prob_b)
-            )
+            o, a, o2, r, done, lp_b = (take(x, rows) for x in (obs, actions, next_obs, rewards, terminal, log_prob_b))
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
                 next_q, clipped = self._bootstrap_value(updater, o2, bounds)
@@ -327,10 +352,10 @@ class DENFAC(
             if sample is None or sample.actor_rows is None:
                 actor_objective = updater.fit_actor(obs)
             else:
-                actor_objective = updater.fit_actor(obs[sample.actor_rows], sample.actor_batches)
+                actor_objective = updater.fit_actor(take(obs, sample.actor_rows), sample.actor_batches)
         updater.finish()
         seconds = time.perf_counter() - start
-        n = obs.shape[0]
+        n = n_rows(rewards)
         return FitResult(updater, n_iterations, seconds, q_targets, weights, rows, critic_loss, actor_objective, clipped, n)
 
     def _record(self, fits: list[FitResult]) -> None:

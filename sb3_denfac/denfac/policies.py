@@ -15,7 +15,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BaseModel, BasePolicy
 from stable_baselines3.common.preprocessing import get_action_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
@@ -285,6 +285,14 @@ class DENFACPolicy(DENFACBasePolicy):
 
     def make_actor(self) -> nn.Module:
         return DENFACActor(**self._update_features_extractor(self.actor_kwargs))  # type: ignore[arg-type]
+
+
+class MultiInputPolicy(DENFACPolicy):
+    """:class:`DENFACPolicy` for Dict observations (goal-conditioned envs): SB3's ``CombinedExtractor`` by default, one
+    for the actor and one for the critic."""
+
+    def __init__(self, *args: Any, features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor, **kwargs: Any):
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
 
 
 MlpPolicy = DENFACPolicy

@@ -37,6 +37,7 @@ from torch import nn
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
+from sb3_denfac.denfac.buffers import n_rows, take
 from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
 
 
@@ -259,9 +260,11 @@ class AutogradUpdater(Updater):
         critic.set_training_mode(True)
         loss = th.zeros(())
         for step in range(settings.critic_steps):
-            idx, w = (batches[step], None) if batches is not None else self.draw(obs.shape[0], settings.prioritized != "none")
+            idx, w = (batches[step], None) if batches is not None else self.draw(n_rows(obs), settings.prioritized != "none")
             o, a, q, c = (
-                (obs, actions, q_targets, weights) if idx is None else (obs[idx], actions[idx], q_targets[idx], weights[idx])
+                (obs, actions, q_targets, weights)
+                if idx is None
+                else (take(obs, idx), actions[idx], q_targets[idx], weights[idx])
             )
             critic.optimizer.zero_grad(set_to_none=True)
             losses = []
@@ -286,10 +289,10 @@ class AutogradUpdater(Updater):
         actor.set_training_mode(True)
         critic.set_training_mode(False)  # ascend the fitted Q without touching its running statistics
         critic.requires_grad_(False)
-        low, high = th.full((1,), -1.0, device=obs.device), th.full((1,), 1.0, device=obs.device)
+        low, high = th.full((1,), -1.0, device=self.policy.device), th.full((1,), 1.0, device=self.policy.device)
         for step in range(settings.actor_steps):
-            idx, w = (batches[step], None) if batches is not None else self.draw(obs.shape[0], settings.prioritized == "both")
-            o = obs if idx is None else obs[idx]
+            idx, w = (batches[step], None) if batches is not None else self.draw(n_rows(obs), settings.prioritized == "both")
+            o = take(obs, idx)
             actor.optimizer.zero_grad(set_to_none=True)
             pi = actor(o)
             q = critic(o, pi) if w is None else w * critic(o, pi)

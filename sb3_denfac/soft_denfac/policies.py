@@ -10,6 +10,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.preprocessing import get_action_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs
 from stable_baselines3.sac.policies import Actor as SACActor
 from torch import nn
@@ -124,6 +125,13 @@ def check_target_entropy(target_entropy: str | float, action_space: spaces.Space
     if not is_real or not math.isfinite(float(target_entropy)):  # type: ignore[arg-type]
         raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
     return float(target_entropy)  # type: ignore[arg-type]
+
+
+class MultiInputPolicy(SoftDENFACPolicy):
+    """:class:`SoftDENFACPolicy` for Dict observations (goal-conditioned envs): SB3's ``CombinedExtractor`` by default."""
+
+    def __init__(self, *args: Any, features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor, **kwargs: Any):
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
 
 
 MlpPolicy = SoftDENFACPolicy

@@ -19,7 +19,7 @@ from sb3_denfac.denfac.options import FittedIterations, clip_bootstrap
 from sb3_denfac.denfac.policies import DENFACPolicy
 from sb3_denfac.denfac.update_paths import UpdaterClasses
 from sb3_denfac.denfac.updaters import Updater
-from sb3_denfac.soft_denfac.policies import MlpPolicy, SoftDENFACPolicy, check_target_entropy, parse_ent_coef
+from sb3_denfac.soft_denfac.policies import MlpPolicy, MultiInputPolicy, SoftDENFACPolicy, check_target_entropy, parse_ent_coef
 from sb3_denfac.soft_denfac.updaters import SOFT_UPDATERS, SoftActorFit
 
 
@@ -55,7 +55,7 @@ class SoftDENFAC(DENFAC):
     DENFAC's).
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy}
     updater_classes: ClassVar[UpdaterClasses] = SOFT_UPDATERS
     policy: SoftDENFACPolicy
 

@@ -11,6 +11,7 @@ import torch as th
 from torch import nn
 from torch.nn.utils import clip_grad_norm_
 
+from sb3_denfac.denfac.buffers import n_rows, take
 from sb3_denfac.denfac.fast import FastUpdater
 from sb3_denfac.denfac.update_paths import UpdaterClasses
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
@@ -47,8 +48,8 @@ class SoftActorFit(Updater):
             critic.set_training_mode(False)
             critic.requires_grad_(False)
             for step in range(settings.actor_steps):
-                idx = batches[step] if batches is not None else self.batch_indices(obs.shape[0])
-                o = obs if idx is None else obs[idx]
+                idx = batches[step] if batches is not None else self.batch_indices(n_rows(obs))
+                o = take(obs, idx)
                 ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
                 actions, log_prob = actor.action_log_prob(o)
                 log_prob = log_prob.unsqueeze(1)

@@ -1,0 +1,127 @@
+"""Goal-conditioned envs: Dict observations (``MultiInputPolicy``) and hindsight relabelling (``HerReplayBuffer``)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3 import HerReplayBuffer
+
+from sb3_denfac import DENFAC, SoftDENFAC, presets
+from sb3_denfac.denfac import DENFACDictReplayBuffer, DENFACHerReplayBuffer
+from sb3_denfac.denfac.updaters import AutogradUpdater
+
+#: a small budget of Algorithm 1's update: 2 fitted iterations of 20 critic and 10 actor steps, mini-batches of 64
+SMALL = dict(n_fitted_iterations=2, critic_steps=20, actor_steps=10, batch_size=64)
+HER = dict(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(n_sampled_goal=4, goal_selection_strategy="future"))
+
+
+class PointReach(gym.Env):
+    """A point in [-1, 1]^2 moved by 0.3 a per step towards a goal drawn uniformly in the square: the observation is a
+    Dict (``observation``, ``achieved_goal`` = the position, ``desired_goal``), the reward sparse as in Fetch's tasks:
+    0 within 0.2 of the goal, else -1 (``compute_reward``, which HER calls on relabelled goals)."""
+
+    def __init__(self) -> None:
+        box = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.observation_space = spaces.Dict(observation=box, achieved_goal=box, desired_goal=box)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        return dict(observation=self.position.copy(), achieved_goal=self.position.copy(), desired_goal=self.goal.copy())
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        super().reset(seed=seed)
+        self.position = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+        self.goal = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+        return self._obs(), {}
+
+    def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
+        distance = np.linalg.norm(np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1)
+        return -(distance > 0.2).astype(np.float32)
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        self.position = np.clip(self.position + 0.3 * np.clip(action, -1, 1), -1, 1).astype(np.float32)
+        reward = float(self.compute_reward(self.position, self.goal, {}))
+        return self._obs(), reward, False, False, {"is_success": reward == 0.0}
+
+
+def point_reach() -> gym.Env:
+    return gym.wrappers.TimeLimit(PointReach(), max_episode_steps=10)
+
+
+def success_rate(model, episodes: int = 30) -> float:
+    env, successes = point_reach(), 0
+    for i in range(episodes):
+        obs, _ = env.reset(seed=1000 + i)
+        done = False
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        successes += info["is_success"]
+    return successes / episodes
+
+
+def test_her_makes_denfac_reach_the_goals() -> None:
+    """40 episodes of 10 steps: with hindsight goals nearly every goal is reached; without, almost none (a sparse reward
+    that random play rarely earns)."""
+    her = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER)
+    plain = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL)
+    assert isinstance(her.replay_buffer, DENFACHerReplayBuffer) and type(plain.replay_buffer) is DENFACDictReplayBuffer
+    before = success_rate(her)
+    her.learn(400)
+    plain.learn(400)
+    after, without = success_rate(her), success_rate(plain)
+    assert before < 0.2 and after >= 0.8 and without < 0.5, (before, after, without)
+
+
+def test_her_all_samples_are_the_transitions_then_relabelled_copies() -> None:
+    model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)  # 3 finished episodes
+    data = model.replay_buffer.all_samples()
+    assert set(data.observations) == {"observation", "achieved_goal", "desired_goal"}
+    assert data.rewards.shape == (30 + 4 * 30, 1) and data.behaviour_means.shape == (150, 2)
+    real, relabelled = data.observations, {k: v[30:] for k, v in data.next_observations.items()}
+    env = PointReach()
+    np.testing.assert_array_equal(  # relabelled rewards are the env's for the new goals
+        data.rewards[30:, 0].numpy(), env.compute_reward(relabelled["achieved_goal"], relabelled["desired_goal"], {})
+    )
+    assert th.equal(data.actions[30:], data.actions[:30].repeat_interleave(4, dim=0))
+    assert th.equal(real["observation"][30:], real["observation"][:30].repeat_interleave(4, dim=0))
+    assert (data.rewards[30:] == 0).float().mean() > (data.rewards[:30] == 0).float().mean()  # goals achieved by design
+
+
+def test_multi_input_policy_saves_loads_and_takes_the_autograd_update(tmp_path) -> None:
+    model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)
+    assert isinstance(model.make_updater(), AutogradUpdater)  # the fast updater needs vector observations
+    obs = point_reach().reset(seed=3)[0]
+    model.save(tmp_path / "model.zip")
+    loaded = DENFAC.load(tmp_path / "model.zip", env=point_reach())
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+    assert isinstance(loaded.replay_buffer, DENFACHerReplayBuffer)
+    loaded.learn(20)
+    with pytest.raises(ValueError, match="update_path='fast' needs vector observations"):
+        DENFAC("MultiInputPolicy", point_reach(), update_path="fast").make_updater()
+
+
+def test_paper_preset_with_goals_works_without_her_and_is_refused_with_it_for_its_reason() -> None:
+    paper = presets.paper(buffer_size=100)
+    DENFAC("MultiInputPolicy", point_reach(), seed=0, **paper).learn(20)  # Dict observations: Algorithm 1 as written
+    with pytest.raises(ValueError, match=r"needs weighting='none'.*density under the new goal"):
+        DENFAC("MultiInputPolicy", point_reach(), **paper, **HER)
+    DENFAC("MultiInputPolicy", point_reach(), seed=0, **{**paper, "weighting": "none"}, **HER).learn(20)
+
+
+def test_soft_denfac_takes_goals_and_her() -> None:
+    model = SoftDENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)
+    assert model._n_updates == 3 and isinstance(model.replay_buffer, DENFACHerReplayBuffer)
+
+
+def test_mlp_policy_on_a_dict_env_says_to_use_multi_input_policy() -> None:
+    with pytest.raises(ValueError, match="MultiInputPolicy"):
+        DENFAC("MlpPolicy", point_reach())
+    with pytest.raises(ValueError, match="HerReplayBuffer or subclass DENFACReplayBuffer"):
+        from stable_baselines3.common.buffers import DictReplayBuffer
+
+        DENFAC("MultiInputPolicy", point_reach(), replay_buffer_class=DictReplayBuffer)
