@@ -299,9 +299,10 @@ def main(argv: list[str] | None = None) -> None:
                         hit = reached(run)
                         print(f"{env_id} {delay} {row} seed {seed}: wall {run['wall']:.0f} s, level at {hit}", flush=True)
     latency_file = output / "latency.json"
-    if not args.report_only or not latency_file.exists():
-        latency_file.write_text(json.dumps({env_id: predict_latency(env_id) for env_id in args.envs}, indent=1))
-    latency = json.loads(latency_file.read_text())
+    latency = json.loads(latency_file.read_text()) if latency_file.exists() else {}
+    if not args.report_only:  # this run's envs measured again, the others' kept
+        latency.update({env_id: predict_latency(env_id) for env_id in args.envs})
+        latency_file.write_text(json.dumps(latency, indent=1))
     machine = machine_info()
     header = dict(commit=git.get("commit", "?")[:7], machine=f"{machine['cpu_model']}, {machine['nproc']} cores")
     (output / "slow_env.md").write_text(report(runs, latency, header))

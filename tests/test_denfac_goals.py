@@ -125,3 +125,46 @@ def test_mlp_policy_on_a_dict_env_says_to_use_multi_input_policy() -> None:
         from stable_baselines3.common.buffers import DictReplayBuffer
 
         DENFAC("MultiInputPolicy", point_reach(), replay_buffer_class=DictReplayBuffer)
+
+
+def test_zoo_trains_denfac_with_her_from_yaml(tmp_path) -> None:
+    """rl-baselines3-zoo's HER style (``replay_buffer_class: HerReplayBuffer``) reaches DENFAC's buffer."""
+    from sb3_denfac import zoo
+
+    gym.register("sb3_denfac_tests/PointReach-v0", entry_point=PointReach, max_episode_steps=10)
+    conf = tmp_path / "denfac.yml"
+    conf.write_text(
+        "sb3_denfac_tests/PointReach-v0:\n  n_timesteps: 100\n  policy: 'MultiInputPolicy'\n  gamma: 0.95\n"
+        "  n_fitted_iterations: 1\n  critic_steps: 5\n  actor_steps: 5\n"
+        "  replay_buffer_class: HerReplayBuffer\n"
+        "  replay_buffer_kwargs: \"dict(goal_selection_strategy='future', n_sampled_goal=4)\"\n"
+    )
+    logs = tmp_path / "logs"
+    args = ["--algo", "denfac", "--env", "sb3_denfac_tests/PointReach-v0", "-f", str(logs), "--seed", "0"]
+    zoo.main(["train", *args, "--conf-file", str(conf), "--eval-freq", "-1", "--save-replay-buffer"])
+    (run,) = (logs / "denfac").iterdir()
+    model = DENFAC.load(run / "sb3_denfac_tests-PointReach-v0.zip", env=point_reach())  # HER needs the env, as SB3's
+    assert model.policy_class.__name__ == "MultiInputPolicy" and model.gamma == 0.95
+    assert model.replay_buffer_class is DENFACHerReplayBuffer
+
+
+def test_the_shipped_panda_reach_entry_trains(tmp_path) -> None:
+    """hyperparams/denfac.yml's PandaReach-v3 entry (the robotics extra: skipped where panda-gym is not installed)."""
+    pytest.importorskip("panda_gym")
+    from sb3_denfac import zoo
+
+    args = ["--algo", "denfac", "--env", "PandaReach-v3", "--gym-packages", "panda_gym", "-f", str(tmp_path), "-n", "100"]
+    zoo.main(["train", *args])
+    assert list((tmp_path / "denfac").glob("PandaReach-v3_1/PandaReach-v3.zip"))
+
+
+def test_panda_reach_without_its_package_names_the_extra(tmp_path) -> None:
+    import importlib.util
+
+    from sb3_denfac import zoo
+
+    if importlib.util.find_spec("panda_gym") is not None:
+        pytest.skip("panda-gym is installed")
+    with pytest.raises(SystemExit) as excinfo:
+        zoo.main(["train", "--algo", "denfac", "--env", "PandaReach-v3", "-f", str(tmp_path / "logs")])
+    assert "pip install 'sb3-denfac[robotics]' and pass --gym-packages panda_gym" in str(excinfo.value.code)

@@ -135,6 +135,10 @@ def load_config_file(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
     return content
 
 
+#: env ids of hyperparams/ entries that an optional package registers: (its module for --gym-packages, the extra)
+OPTIONAL_ENV_PACKAGES = {"PandaReach-v3": ("panda_gym", "robotics")}
+
+
 def check_env_id(env_id: str, where: str = "") -> None:
     """Fail with the package's env ids (and the closest registered one) if ``env_id`` is not a registered Gym id."""
     import gymnasium as gym
@@ -142,6 +146,11 @@ def check_env_id(env_id: str, where: str = "") -> None:
     known = sorted(gym.registry.keys())
     if env_id in known:
         return
+    if env_id in OPTIONAL_ENV_PACKAGES:
+        module, extra = OPTIONAL_ENV_PACKAGES[env_id]
+        raise ZooConfigError(
+            f"{env_id!r}{where} is registered by {module}: pip install 'sb3-denfac[{extra}]' and pass --gym-packages {module}"
+        )
     close = difflib.get_close_matches(env_id, known, n=3, cutoff=0.6)
     hint = f" Did you mean {', '.join(close)}?" if close else ""
     raise ZooConfigError(
@@ -180,9 +189,10 @@ def check_action_space_fits(algo: str, env_id: str) -> None:
 
 
 def check_env_keys(config: dict[str, Any], path: str | os.PathLike) -> None:
-    """Every key of a zoo file is a registered env id, ``default`` or ``atari`` (the zoo's fallbacks)."""
+    """Every key of a zoo file is a registered env id, ``default`` or ``atari`` (the zoo's fallbacks), or the id of an
+    optional package's env (:data:`OPTIONAL_ENV_PACKAGES`), checked when that env is asked for."""
     for key in config:
-        if key not in ("default", "atari"):
+        if key not in ("default", "atari", *OPTIONAL_ENV_PACKAGES):
             check_env_id(str(key), where=f" (a key of {path})")
 
 
@@ -377,7 +387,11 @@ def validate_config_file(path: str | os.PathLike, algo: str, check_env_ids: bool
     config = load_config_file(path)
     if check_env_ids:
         check_env_keys(config, path)
+    import gymnasium as gym
+
     for env_id, entry in config.items():
+        if env_id in OPTIONAL_ENV_PACKAGES and env_id not in gym.registry:
+            continue  # its package is not installed: checked when it is and the env is asked for
         target = str(env_id) if env_id not in ("default", "atari") else DEFAULT_ENTRY_ENV
         source = f"{path}, entry {env_id!r}"
         validate_entry(algo, expand_preset(entry, f" ({source})", algo), source=source, env_id=target)
