@@ -1,0 +1,51 @@
+"""Probe: DENFAC + HER and SB3 SAC + HER on PandaReach-v3 (panda-gym, the robotics extra), one seed.
+
+    python -m research.robotics.panda_reach_probe denfac 0.95     # DENFAC's default + HerReplayBuffer, gamma 0.95
+    python -m research.robotics.panda_reach_probe denfac 0.99
+    python -m research.robotics.panda_reach_probe sac 0.95        # SB3 SAC + HER, learning_starts 1000 (zoo style)
+
+Every 10 training episodes (500 steps), the success rate of 10 deterministic test episodes (seeds 500-509), the wall
+and CPU seconds so far (the evaluation included). Results and the decision: README.md beside this file.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import gymnasium as gym
+import panda_gym  # noqa: F401  (registers PandaReach-v3)
+from stable_baselines3 import SAC, HerReplayBuffer
+
+from sb3_denfac import DENFAC
+
+
+def success(model, n: int = 10, seed: int = 500) -> float:
+    env, reached = gym.make("PandaReach-v3"), 0
+    for i in range(n):
+        obs, _ = env.reset(seed=seed + i)
+        done = False
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        reached += info["is_success"]
+    return reached / n
+
+
+def main() -> None:
+    algo, gamma = sys.argv[1], float(sys.argv[2])
+    her = dict(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(n_sampled_goal=4))
+    env = gym.make("PandaReach-v3")
+    if algo == "denfac":
+        model = DENFAC("MultiInputPolicy", env, seed=0, gamma=gamma, **her)
+    else:
+        model = SAC("MultiInputPolicy", env, seed=0, gamma=gamma, learning_starts=1000, **her)
+    start, cpu = time.time(), time.process_time()
+    for chunk in range(12):
+        model.learn(500, reset_num_timesteps=False)
+        print((chunk + 1) * 10, success(model), round(time.time() - start), round(time.process_time() - cpu), flush=True)
+
+
+if __name__ == "__main__":
+    main()
