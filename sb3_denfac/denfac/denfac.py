@@ -7,13 +7,11 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
 from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
@@ -33,14 +31,12 @@ from sb3_denfac.common.threads import TorchThreadsMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import (
     BehaviourMeansBuffer,
-    DENFACDictReplayBuffer,
-    DENFACReplayBuffer,
     DENFACReplayBufferSamples,
     check_holds_one_episode,
     n_rows,
     take,
 )
-from sb3_denfac.denfac.her import DENFACHerReplayBuffer, check_her
+from sb3_denfac.denfac.her import replay_buffer_class_for
 from sb3_denfac.denfac.learner import AsyncUpdateMixin
 from sb3_denfac.denfac.options import (
     FittedIterations,
@@ -135,9 +131,9 @@ class DENFAC(
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
         the last published policy plays (:mod:`~.learner`: what changes; default False: the update runs between
         episodes, reproducible from the seed)
-    :param replay_buffer_class: D's class: None (:class:`DENFACReplayBuffer`, or :class:`DENFACDictReplayBuffer` for
-        Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals: :mod:`~.her`, with ``weighting="none"``) or a
-        subclass of one of them
+    :param replay_buffer_class: D's class: None (:class:`~.buffers.DENFACReplayBuffer`, or
+        :class:`~.buffers.DENFACDictReplayBuffer` for Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals:
+        :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
@@ -158,7 +154,7 @@ class DENFAC(
     #: fits its networks otherwise names its own (:class:`~sb3_denfac.soft_denfac.SoftDENFAC`)
     updater_classes: ClassVar[UpdaterClasses] = DENFAC_UPDATERS
     policy: DENFACPolicy
-    replay_buffer: DENFACReplayBuffer
+    replay_buffer: BehaviourMeansBuffer  # type: ignore[assignment]
     #: the last update's statistics (:class:`UpdateStats`), None before the first
     last_update: UpdateStats | None = None
     #: the last updates' statistics: the 2 n_envs last, at least all those since the previous env step (several envs'
@@ -246,28 +242,12 @@ class DENFAC(
 
     def _setup_model(self) -> None:
         upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings
-        self.replay_buffer_class = self._buffer_class(self.replay_buffer_class)
+        self.replay_buffer_class = replay_buffer_class_for(self, self.replay_buffer_class)
         self.policy_kwargs.update(self._policy_settings())
         super()._setup_model()
         self._create_aliases()
         self._setup_actor_critic_schedules()
         check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
-
-    def _buffer_class(self, given: type[ReplayBuffer] | None) -> type[ReplayBuffer]:
-        """D's class: DENFAC's buffer for the observations (Dict ones: :class:`DENFACDictReplayBuffer`), SB3's
-        ``HerReplayBuffer`` taken as :class:`~.her.DENFACHerReplayBuffer`, or a subclass of one of them."""
-        if given is None:
-            return DENFACDictReplayBuffer if isinstance(self.observation_space, spaces.Dict) else DENFACReplayBuffer
-        if given is HerReplayBuffer:
-            given = DENFACHerReplayBuffer  # the same arguments (n_sampled_goal, goal_selection_strategy, ...)
-        if not issubclass(given, BehaviourMeansBuffer):
-            raise ValueError(
-                f"replay_buffer_class must be SB3's HerReplayBuffer or subclass DENFACReplayBuffer, DENFACDictReplayBuffer "
-                f"or DENFACHerReplayBuffer (they keep each transition's behaviour mean), got {given}"
-            )
-        if issubclass(given, HerReplayBuffer):
-            check_her(type(self).__name__, self.weighting)
-        return given
 
     def _policy_settings(self) -> dict[str, Any]:
         """The algorithm's settings its policy is built with (on top of ``policy_kwargs``): the exploration's sigma."""

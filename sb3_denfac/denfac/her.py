@@ -23,10 +23,35 @@ from typing import Any
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.vec_env import VecNormalize
 from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
-from sb3_denfac.denfac.buffers import BehaviourMeansBuffer, DENFACReplayBufferSamples
+from sb3_denfac.denfac.buffers import (
+    BehaviourMeansBuffer,
+    DENFACDictReplayBuffer,
+    DENFACReplayBuffer,
+    DENFACReplayBufferSamples,
+)
+
+
+def replay_buffer_class_for(model: Any, given: type[ReplayBuffer] | None) -> type[ReplayBuffer]:
+    """D's class for a DENFAC ``model``: its buffer for the observations (Dict ones: :class:`DENFACDictReplayBuffer`),
+    SB3's ``HerReplayBuffer`` taken as :class:`DENFACHerReplayBuffer` (the same arguments: ``n_sampled_goal``,
+    ``goal_selection_strategy``, ...), or a subclass of one of them; HER is refused with importance weights."""
+    if given is None:
+        return DENFACDictReplayBuffer if isinstance(model.observation_space, spaces.Dict) else DENFACReplayBuffer
+    if given is HerReplayBuffer:
+        given = DENFACHerReplayBuffer
+    if not issubclass(given, BehaviourMeansBuffer):
+        raise ValueError(
+            "replay_buffer_class must be SB3's HerReplayBuffer or subclass DENFACReplayBuffer, DENFACDictReplayBuffer or "
+            f"DENFACHerReplayBuffer (they keep each transition's behaviour mean), got {given}"
+        )
+    if issubclass(given, HerReplayBuffer):
+        check_her(type(model).__name__, model.weighting)
+    return given
 
 
 def check_her(algorithm: str, weighting: str) -> None:
