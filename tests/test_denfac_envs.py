@@ -124,11 +124,15 @@ def test_async_update_save_during_learn_loads(tmp_path) -> None:
 
 @pytest.mark.parametrize("algo", [DENFAC, SoftDENFAC])
 def test_several_envs_with_async_update_learn_pendulum(algo) -> None:
-    """4 envs, an asynchronous update after each env's episode: 24 episodes of Pendulum-v1 lift the greedy return far
-    above the untrained policy's (about -1200)."""
-    model = algo("MlpPolicy", make_vec_env("Pendulum-v1", n_envs=4, seed=0), seed=0, async_update=True)
-    before, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
-    model.learn(24 * 200)
-    after, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
+    """4 envs in subprocesses, an asynchronous update after each env's episode: 24 episodes of Pendulum-v1 lift the
+    greedy return far above the untrained policy's (about -1200)."""
+    env = make_vec_env("Pendulum-v1", n_envs=4, seed=0, vec_env_cls=SubprocVecEnv)
+    try:
+        model = algo("MlpPolicy", env, seed=0, async_update=True)
+        before, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
+        model.learn(24 * 200)
+        after, _ = evaluate_policy(model, make_vec_env("Pendulum-v1", n_envs=1, seed=100), n_eval_episodes=5)
+    finally:
+        env.close()
     assert model._n_updates == 24
     assert after > -600 and after > before + 400, (before, after)
