@@ -3,6 +3,7 @@
     python -m research.robotics.panda_reach_probe denfac 0.95     # DENFAC's default + HerReplayBuffer, gamma 0.95
     python -m research.robotics.panda_reach_probe denfac 0.99
     python -m research.robotics.panda_reach_probe sac 0.95        # SB3 SAC + HER, learning_starts 1000 (zoo style)
+    python -m research.robotics.panda_reach_probe denfac_dial 0.95  # with update_to_data_ratio=10, K in (1, 10)
 
 Every 10 training episodes (500 steps), the success rate of 10 deterministic test episodes (seeds 500-509), the wall
 and CPU seconds so far (the evaluation included). Results and the decision: README.md beside this file.
@@ -39,12 +40,22 @@ def main() -> None:
     env = gym.make("PandaReach-v3")
     if algo == "denfac":
         model = DENFAC("MultiInputPolicy", env, seed=0, gamma=gamma, **her)
+    elif algo == "denfac_dial":  # K_e = clip(ceil(10 n / 50), 1, 10): about 10 critic steps per env step
+        dial = dict(update_to_data_ratio=10, n_fitted_iterations=(1, 10))
+        model = DENFAC("MultiInputPolicy", env, seed=0, gamma=gamma, **dial, **her)
     else:
         model = SAC("MultiInputPolicy", env, seed=0, gamma=gamma, learning_starts=1000, **her)
     start, cpu = time.time(), time.process_time()
     for chunk in range(12):
         model.learn(500, reset_num_timesteps=False)
-        print((chunk + 1) * 10, success(model), round(time.time() - start), round(time.process_time() - cpu), flush=True)
+        print(
+            (chunk + 1) * 10,
+            success(model),
+            round(time.time() - start),
+            round(time.process_time() - cpu),
+            f"{model._n_updates} updates, {model.num_timesteps} steps",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":
