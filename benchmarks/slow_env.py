@@ -208,7 +208,8 @@ def report(runs: list[dict[str, Any]], latency: dict[str, Any], header: dict[str
         "Level: the env's threshold on 5 deterministic episodes of the policy that played after an episode end. "
         "Wall: seconds from the start of `learn()` to that policy; CPU: this process's seconds for the whole run "
         "(the learner thread included; SubprocVecEnv's workers not). Cells: median over seeds (per seed); "
-        "'-' a seed that did not reach the level within the budget.",
+        "'-' a seed that did not reach the level within the budget. Wall s for the budget: the whole run; last "
+        "evaluation: the policy after the last episode (medians over seeds).",
         "",
     ]
     groups = sorted({(r["env"], r["delay"]) for r in runs}, key=lambda g: (g[0], -g[1]))
@@ -218,8 +219,8 @@ def report(runs: list[dict[str, Any]], latency: dict[str, Any], header: dict[str
             f"## {env_id}, {delay * 1000:.0f} ms per step (level {facts.threshold:g}, budget {BUDGETS.get(env_id)} episodes)",
             "",
             "| row | wall s to the level | ratio to 1 env | episodes to the level | env steps | CPU s per run "
-            "| seeds at the level |",
-            "|---|---|---|---|---|---|---|",
+            "| seeds at the level | wall s for the budget | last evaluation |",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         base = None
         for row in ROWS:
@@ -236,7 +237,8 @@ def report(runs: list[dict[str, Any]], latency: dict[str, Any], header: dict[str
             lines.append(
                 f"| {LABELS[row]} | {_cell(walls, '.0f')} | {ratio} | {episodes} "
                 f"| {_cell([h['steps'] if h else None for h in hits], '.0f')} | {_median([r['cpu'] for r in cell]):.0f} "
-                f"| {sum(h is not None for h in hits)} of {len(hits)} |"
+                f"| {sum(h is not None for h in hits)} of {len(hits)} | {_median([r['wall'] for r in cell]):.0f} "
+                f"| {_median([r['evaluations'][-1]['mean'] for r in cell]):.1f} |"
             )
         lines.append("")
     if latency:
