@@ -22,6 +22,12 @@ import numpy as np
 from stable_baselines3.common.type_aliases import RolloutReturn, TrainFrequencyUnit
 
 
+def stored_dones(args: tuple[Any, ...], kwargs: dict[str, Any]) -> np.ndarray:
+    """The ``dones`` of SB3's ``_store_transition(replay_buffer, buffer_action, new_obs, reward, dones, infos)``, from
+    the arguments after ``buffer_action``."""
+    return np.asarray(args[2] if len(args) > 2 else kwargs["dones"], dtype=bool)
+
+
 def budget_reached(model: Any) -> bool:
     """True once ``model.num_timesteps`` has reached the ``total_timesteps`` of the running ``learn`` call."""
     return model.num_timesteps >= model._total_timesteps
@@ -54,7 +60,7 @@ class StopAtTotalTimestepsMixin:
 
     def _store_transition(self, replay_buffer: Any, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)  # type: ignore[misc]
-        dones = args[2] if len(args) > 2 else kwargs["dones"]  # SB3: (new_obs, reward, dones, infos)
+        dones = stored_dones(args, kwargs)
         if self._rollout_counts is None:
             return
         self._rollout_counts[0] += 1

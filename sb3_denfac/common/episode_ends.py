@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.type_aliases import RolloutReturn, TrainFreq, TrainFrequencyUnit
 
-from sb3_denfac.common.budget import budget_reached
+from sb3_denfac.common.budget import budget_reached, stored_dones
 
 
 class EpisodeEndsMixin:
@@ -57,7 +57,7 @@ class EpisodeEndsMixin:
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)  # type: ignore[misc]
         if self._episode_steps is None or self._finished is None:
             return
-        dones = np.asarray(args[2] if len(args) > 2 else kwargs["dones"], dtype=bool)  # SB3: (new_obs, reward, dones, infos)
+        dones = stored_dones(args, kwargs)
         self._episode_steps += 1
         ended = np.ones_like(dones) if budget_reached(self) else dones
         if self.num_timesteps > self.learning_starts:  # type: ignore[attr-defined]

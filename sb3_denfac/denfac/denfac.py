@@ -293,14 +293,13 @@ class DENFAC(
         return make_updater(policy, FitSettings.of(self), self.update_path, self.updater_classes).updater
 
     def _update(self, n_iterations: int | None = None) -> None:
-        """One end-of-episode update now, in this thread: Algorithm 1 with ``n_iterations`` (default K) fitted
-        iterations over D."""
+        """One end-of-episode update now (in this thread, outside an asynchronous ``learn()``): Algorithm 1 with
+        ``n_iterations`` (default K) fitted iterations over D."""
         if n_iterations is None:
             if not isinstance(self.n_fitted_iterations, int):
                 raise ValueError("n_fitted_iterations is a range for update_to_data_ratio: pass _update the iterations")
             n_iterations = self.n_fitted_iterations
-        data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
-        self._record([self._fit(self.make_updater(), data, n_iterations)])
+        self._run_updates([n_iterations])
 
     def _fit(self, updater: Updater, data: DENFACReplayBufferSamples, n_iterations: int) -> FitResult:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` fitted iterations over D (``data``, the

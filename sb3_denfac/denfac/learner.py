@@ -68,8 +68,7 @@ class AsyncUpdateMixin:
     """The update's two modes for DENFAC (put it before SB3's ``OffPolicyAlgorithm``): :meth:`_run_updates` runs the
     updates of the episodes just finished in the calling thread, or, with ``async_update`` inside ``learn``, on the
     learner thread (module docstring). The host provides ``_fit(updater, data, n_iterations)`` (one update on copies it
-    is given, returning what :meth:`_record` needs), ``_update(n_iterations)`` (one update now, in place),
-    ``_record(fits)``, ``make_updater(policy)`` and ``_create_aliases``.
+    is given, returning what :meth:`_record` needs), ``_record(fits)``, ``make_updater(policy)`` and ``_create_aliases``.
     """
 
     async_update: bool
@@ -78,8 +77,8 @@ class AsyncUpdateMixin:
     def _run_updates(self, iterations: list[int]) -> None:
         """One update per finished episode, ``iterations[i]`` fitted iterations each, back to back."""
         if self._learner is None:
-            for n_iterations in iterations:
-                self._update(n_iterations)  # type: ignore[attr-defined]
+            data = self.replay_buffer.all_samples(env=self._vec_normalize_env)  # type: ignore[attr-defined]
+            self._record(self._fit_all(self.policy, data, iterations))  # type: ignore[attr-defined]
             return
         self._publish(wait=True)  # the update still running, if any: at most one in flight
         policy = copy.deepcopy(self.policy)  # type: ignore[attr-defined]
@@ -88,8 +87,13 @@ class AsyncUpdateMixin:
         if budget_reached(self):  # the last update of this learn(): published before learn() returns
             self._publish(wait=True)
 
+    def _fit_all(self, policy: Any, data: Any, iterations: list[int]) -> list[Any]:
+        """The updates of ``policy`` on D's content ``data``, back to back: a new updater for each, made after the
+        previous one finished."""
+        return [self._fit(self.make_updater(policy), data, n) for n in iterations]  # type: ignore[attr-defined]
+
     def _fit_in_background(self, policy: Any, data: Any, iterations: list[int]) -> tuple[Any, list[Any]]:
-        return policy, [self._fit(self.make_updater(policy), data, n) for n in iterations]  # type: ignore[attr-defined]
+        return policy, self._fit_all(policy, data, iterations)
 
     def _publish(self, wait: bool) -> None:
         """Make the learner's finished update (``wait``: or the running one, once it ends) the model's policy, and
