@@ -91,6 +91,9 @@ ALGOS: dict[str, Algo] = {
         ),  # fmt: skip
         # the compute dial's data-efficient end (sb3_denfac.denfac.presets.DATA_EFFICIENT; configs/)
         Algo("denfac_data_efficient", "denfac", "DENFAC (data-efficient preset)", "paper"),
+        # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
+        # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
+        Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
         Algo("nfac", "nfac", "NFAC+", "paper"),
         Algo("cacla", "cacla", "CACLA+", "paper"),
         Algo("cmaes", "cmaes", "CMA-ES", "paper"),
@@ -172,6 +175,10 @@ MATCHED_ENVS = (*GENERALISATION_ENVS, "hopper", "reacher")
 #: every 10k steps (docs/benchmark.md, "The field's budget").
 MUJOCO100K_ENVS = ("HalfCheetah-v5", "Hopper-v5", "Walker2d-v5", "Ant-v5")
 MUJOCO100K_BUDGET = Budget.steps(100_000, 10_000, 10)
+#: Goal-conditioned arm tasks (panda-gym, the robotics extra), measured by the share of goals reached: a deterministic
+#: evaluation of 20 episodes (goals) every 5 episodes on Reach, every 20 on Push (docs/benchmark.md, "Goal-conditioned").
+ROBOTICS_ENVS = ("PandaReach-v3", "PandaPush-v3")
+ROBOTICS_BUDGETS = (("PandaReach-v3", Budget(100, 5, 20)), ("PandaPush-v3", Budget(200, 20, 20)))
 # A variant env takes the YAML entries of the env it varies (the YAML files are keyed by the paper's env ids).
 HYPERPARAMS_OF = {"acrobot75": "acrobot"}
 
@@ -278,6 +285,16 @@ SUITES: dict[str, Suite] = {
             "MuJoCo settings, with the published 100k-step figures as reference lines",
             study="mujoco100k",
             budgets=tuple((env, MUJOCO100K_BUDGET) for env in MUJOCO100K_ENVS),
+        ),
+        Suite(
+            "robotics",
+            ROBOTICS_ENVS,
+            ((("denfac_her", "sac", "td3", *_MATCHED), _FIVE),),
+            "goal-conditioned arm tasks with hindsight goals (HerReplayBuffer): DENFAC's zoo entry against SB3's SAC and "
+            "TD3 with the zoo's HER settings, at one gradient step per env step and on DENFAC's schedule; success rate "
+            "against episodes, episodes to 90% success, CPU per run",
+            study="robotics",
+            budgets=ROBOTICS_BUDGETS,
         ),
         Suite(
             "denfac_cartpole",

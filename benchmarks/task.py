@@ -34,17 +34,20 @@ _REPO = Path(__file__).resolve().parent.parent
 
 
 def evaluate(model: Any, env: Any, n_episodes: int) -> list[float]:
-    """The measure of ``n_episodes`` deterministic episodes (``info["paper_performance"]``, else the return)."""
+    """The measure of ``n_episodes`` deterministic episodes: ``info["paper_performance"]``, else ``info["is_success"]``
+    (a goal-conditioned env: 1.0 where the goal was reached at the episode's end), else the return. A model trained
+    on a ``VecNormalize`` env (a zoo entry's ``normalize``) sees the observations normalised with its statistics."""
+    normalizer = model.get_vec_normalize_env()
     scores = []
     for _ in range(n_episodes):
         obs, _ = env.reset()
         done, ret, info = False, 0.0, {}
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(obs if normalizer is None else normalizer.normalize_obs(obs), deterministic=True)
             obs, reward, terminated, truncated, info = env.step(action)
             ret += float(reward)
             done = terminated or truncated
-        scores.append(float(info.get("paper_performance", ret)))
+        scores.append(float(info.get("paper_performance", info.get("is_success", ret))))
     return scores
 
 

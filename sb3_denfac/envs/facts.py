@@ -17,7 +17,8 @@ class EnvFacts:
     :param name: short name (command lines, file names).
     :param gym_id: Gymnasium id.
     :param gamma: the discount the env prescribes (the paper's), ``None`` if it prescribes none.
-    :param measure: what the per-episode performance is (``info["paper_performance"]``, else the episode return).
+    :param measure: what the per-episode performance is (``info["paper_performance"]``, else ``info["is_success"]``
+        for a goal-conditioned env, else the episode return).
     :param lower_is_better: direction of the measure (Acrobot: steps to the goal).
     :param threshold: "solved" level of the measure (reached when ``< threshold`` if lower is better, else
         ``>= threshold``); ``None``: no threshold.
@@ -132,6 +133,27 @@ ENV_FACTS: dict[str, EnvFacts] = {
             threshold=-3.75,
             threshold_meaning="Gymnasium's reward_threshold",
             label="Reacher-v5 (return, higher is better)",
+        ),
+        # panda-gym's goal-conditioned arm (the robotics extra): the measure is the share of goals reached
+        EnvFacts(
+            "pandareach",
+            "PandaReach-v3",
+            gamma=None,
+            measure="success: the goal reached at the episode's end (info['is_success']; 50 steps, ends at the goal)",
+            threshold=0.9,
+            threshold_meaning="90% of the evaluation's goals reached",
+            score_range=(0.0, 1.0),
+            label="PandaReach-v3 (success rate)",
+        ),
+        EnvFacts(
+            "pandapush",
+            "PandaPush-v3",
+            gamma=None,
+            measure="success: the object at the goal at the episode's end (info['is_success']; 50 steps)",
+            threshold=0.9,
+            threshold_meaning="90% of the evaluation's goals reached",
+            score_range=(0.0, 1.0),
+            label="PandaPush-v3 (success rate)",
         ),
     )
 }

@@ -136,7 +136,19 @@ def load_config_file(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
 
 
 #: env ids of hyperparams/ entries that an optional package registers: (its module for --gym-packages, the extra)
-OPTIONAL_ENV_PACKAGES = {"PandaReach-v3": ("panda_gym", "robotics")}
+OPTIONAL_ENV_PACKAGES = {"PandaReach-v3": ("panda_gym", "robotics"), "PandaPush-v3": ("panda_gym", "robotics")}
+
+
+def register_optional_env(env_id: str) -> None:
+    """Import the package that registers ``env_id`` (:data:`OPTIONAL_ENV_PACKAGES`; the zoo's ``--gym-packages`` does
+    this on the command line), or fail naming the extra that installs it. Any other id: nothing to do."""
+    if env_id not in OPTIONAL_ENV_PACKAGES:
+        return
+    module, extra = OPTIONAL_ENV_PACKAGES[env_id]
+    try:
+        importlib.import_module(module)
+    except ImportError as error:
+        raise ZooConfigError(f"{env_id!r} is registered by {module}: pip install 'sb3-denfac[{extra}]' ({error})") from error
 
 
 def check_env_id(env_id: str, where: str = "") -> None:
@@ -277,6 +289,7 @@ def make_model(
     :param model_kwargs: extra constructor arguments (e.g. ``tensorboard_log``, ``verbose``, ``device``).
     """
     register()
+    register_optional_env(env_id)
     hyperparams = {"n_timesteps": 0, "policy": "MlpPolicy", **hyperparams}  # the zoo needs both; callers budget episodes
     _, env, kwargs = _zoo_preprocess(algo, env_id, hyperparams, seed, monitor_dir)
     return algorithm_class(algo)(env=env, seed=seed, **{"verbose": 0, **kwargs, **model_kwargs})
