@@ -21,7 +21,7 @@ import pandas as pd
 
 from benchmarks import plots, store, verdicts
 from benchmarks import stats as st
-from benchmarks.suites import ALGOS, SUITES, Suite
+from benchmarks.suites import ALGOS, ROBOTICS_ENVS, SUITES, Suite
 from benchmarks.tables import (
     BEYOND_BONUS_LEVEL,
     answer_table,
@@ -242,6 +242,10 @@ def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str
         from benchmarks import mujoco100k  # (imports nothing of this module)
 
         return mujoco100k.report(out)
+    if records and all(record["env"] in ROBOTICS_ENVS for record in records):  # the goal-conditioned study
+        from benchmarks import robotics  # (imports nothing of this module)
+
+        return robotics.report(out)
     episodes, runs = load_records(records)
     if runs.empty:
         raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")

@@ -5,8 +5,8 @@
     python -m research.robotics.panda_reach_probe sac 0.95        # SB3 SAC + HER, learning_starts 1000 (zoo style)
     python -m research.robotics.panda_reach_probe denfac_dial 0.95  # with update_to_data_ratio=10, K in (1, 10)
 
-Every 10 training episodes (500 steps), the success rate of 10 deterministic test episodes (seeds 500-509), the wall
-and CPU seconds so far (the evaluation included). Results and the decision: README.md beside this file.
+Every 10 training episodes (500 steps), the success rate of 10 deterministic test episodes (goals drawn from seed
+500), the wall and CPU seconds so far (the evaluation included). Results and the decision: README.md beside this file.
 """
 
 from __future__ import annotations
@@ -15,23 +15,19 @@ import sys
 import time
 
 import gymnasium as gym
+import numpy as np
 import panda_gym  # noqa: F401  (registers PandaReach-v3)
 from stable_baselines3 import SAC, HerReplayBuffer
 
+from benchmarks.task import evaluate
 from sb3_denfac import DENFAC
 
 
 def success(model, n: int = 10, seed: int = 500) -> float:
-    env, reached = gym.make("PandaReach-v3"), 0
-    for i in range(n):
-        obs, _ = env.reset(seed=seed + i)
-        done = False
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
-            done = terminated or truncated
-        reached += info["is_success"]
-    return reached / n
+    """The share of ``n`` deterministic test episodes (goals drawn from ``seed``) that end at the goal."""
+    env = gym.make("PandaReach-v3")
+    env.reset(seed=seed)
+    return float(np.mean(evaluate(model, env, n)))
 
 
 def main() -> None:
