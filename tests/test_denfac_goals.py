@@ -13,6 +13,7 @@ from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 from benchmarks.task import evaluate
 from sb3_denfac import DENFAC, SoftDENFAC, presets
 from sb3_denfac.denfac import DENFACDictReplayBuffer, DENFACHerReplayBuffer
+from sb3_denfac.denfac.fast import FastUpdater
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
 #: a small budget of Algorithm 1's update: 2 fitted iterations of 20 critic and 10 actor steps, mini-batches of 64
@@ -47,6 +48,15 @@ class PointReach(gym.Env):
         self.position = np.clip(self.position + 0.3 * np.clip(action, -1, 1), -1, 1).astype(np.float32)
         reward = float(self.compute_reward(self.position, self.goal, {}))
         return self._obs(), reward, False, False, {"is_success": reward == 0.0}
+
+
+class ImageGoal(gym.Env):
+    """A Dict observation with an image (SB3's CombinedExtractor gives it a CNN: not a concatenation of vectors)."""
+
+    observation_space = spaces.Dict(
+        image=spaces.Box(0, 255, shape=(36, 36, 1), dtype=np.uint8), goal=spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    )
+    action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 
 
 def point_reach() -> gym.Env:
@@ -88,17 +98,36 @@ def test_her_all_samples_are_the_transitions_then_relabelled_copies() -> None:
     assert (data.rewards[30:] == 0).float().mean() > (data.rewards[:30] == 0).float().mean()  # goals achieved by design
 
 
-def test_multi_input_policy_saves_loads_and_takes_the_autograd_update(tmp_path) -> None:
+def test_multi_input_policy_saves_loads_and_takes_the_fast_update(tmp_path) -> None:
     model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)
-    assert isinstance(model.make_updater(), AutogradUpdater)  # the fast updater needs vector observations
+    assert isinstance(model.make_updater(), FastUpdater)  # a Dict of 1-D Boxes: CombinedExtractor concatenates them
     obs = point_reach().reset(seed=3)[0]
     model.save(tmp_path / "model.zip")
     loaded = DENFAC.load(tmp_path / "model.zip", env=point_reach())
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
     assert isinstance(loaded.replay_buffer, DENFACHerReplayBuffer)
     loaded.learn(20)
-    with pytest.raises(ValueError, match="update_path='fast' needs vector observations"):
-        DENFAC("MultiInputPolicy", point_reach(), update_path="fast").make_updater()
+    # a features extractor other than the concatenation: the autograd updater, and "fast" refused naming why
+    custom = dict(policy_kwargs=dict(features_extractor_kwargs=dict(cnn_output_dim=8)), **SMALL)
+    image_goal = DENFAC("MultiInputPolicy", ImageGoal(), **custom)
+    assert isinstance(image_goal.make_updater(), AutogradUpdater)
+    with pytest.raises(ValueError, match=r"update_path='fast' needs vector observations \(or a Dict of them"):
+        DENFAC("MultiInputPolicy", ImageGoal(), update_path="fast", **custom).make_updater()
+
+
+def test_fast_and_autograd_updates_agree_with_hindsight_goals() -> None:
+    """The fast updater on Dict observations (concatenated as CombinedExtractor does) computes the autograd updater's
+    update: the same losses and parameters after the same 4 episodes of a goal env with HER (the default's target
+    smoothing included: its noise is drawn alike on both paths)."""
+    plain, fast = (
+        DENFAC("MultiInputPolicy", point_reach(), seed=0, update_path=path, **SMALL, **HER).learn(40)
+        for path in ("plain", "fast")
+    )
+    for key in ("train/critic_loss", "train/actor_loss", "train/q_target_mean"):
+        assert plain.logger.name_to_value[key] == pytest.approx(fast.logger.name_to_value[key], rel=1e-4, abs=1e-5), key
+    fast_state = fast.policy.state_dict()
+    for name, value in plain.policy.state_dict().items():
+        th.testing.assert_close(fast_state[name], value, rtol=1e-4, atol=1e-5, msg=name)
 
 
 def test_paper_preset_with_goals_works_without_her_and_is_refused_with_it_for_its_reason() -> None:

@@ -55,6 +55,9 @@ class MultiActionEnv(gym.Env):
         dict(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), batch_norm=False)),
         # the proximal actor (options.py): full batch with BN and inverting gradients, mini-batches without BN
         dict(actor_proximal=1.0),
+        # TD3's target policy smoothing (the library default's 0.2): the same noise on both paths (two action dims,
+        # where a transposed output would get its draws in another order)
+        dict(env="multi_action", target_policy_noise=0.2, target_noise_clip=0.5),
         # clipped double Q: three critics, each with its own flat state, on the same mini-batches (beta1 = 0.9: with
         # beta1 = 0, rounding-sized gradient components of a twin become lr-sized steps within the later plain updates)
         dict(

@@ -194,15 +194,51 @@ class _FlatNet:
             offset += n
 
 
+def dict_keys_of(policy) -> list[str] | None:
+    """The keys of a Dict observation in the order SB3's ``CombinedExtractor`` concatenates them, where its features
+    are that concatenation (every key a 1-D ``Box``, flattened as it is: ``MultiInputPolicy``'s default on goal
+    envs); None for any other policy."""
+    from gymnasium import spaces
+    from stable_baselines3.common.torch_layers import CombinedExtractor
+
+    space = policy.observation_space
+    if not isinstance(space, spaces.Dict):
+        return None
+    keys = []
+    for net in (policy.actor, policy.critic):
+        extractor = getattr(net, "features_extractor", None)
+        if not isinstance(extractor, CombinedExtractor):
+            return None
+        if not all(isinstance(module, nn.Flatten) for module in extractor.extractors.values()):
+            return None
+        keys.append(list(extractor.extractors))
+    if keys[0] != keys[1] or sorted(keys[0]) != sorted(space.spaces):
+        return None
+    if not all(isinstance(space[key], spaces.Box) and len(space[key].shape) == 1 for key in keys[0]):
+        return None
+    return keys[0]
+
+
+def flat_observations(obs: th.Tensor | dict[str, th.Tensor], keys: list[str] | None) -> th.Tensor:
+    """The networks' input: vector observations as they are, Dict ones concatenated in ``keys``' order (what
+    ``CombinedExtractor`` computes for 1-D Boxes, :func:`dict_keys_of`)."""
+    if keys is None:
+        return obs  # type: ignore[return-value]
+    return th.cat([obs[key].float() for key in keys], dim=1)  # type: ignore[index]
+
+
 def supported_networks(policy, flat_actor: bool = True) -> tuple[list[_Layer] | None, list[list[_Layer]]] | None:
     """Parsed layers of the actor and of each Q network of the critic if the fast path supports this policy (vector
-    observations, Adam), else None; the actor's are None without ``flat_actor`` (an actor fitted by autograd, as
-    SoftDENFAC's)."""
+    observations, or Dict ones of 1-D Boxes with SB3's ``CombinedExtractor``; Adam), else None; the actor's are None
+    without ``flat_actor`` (an actor fitted by autograd, as SoftDENFAC's)."""
     from gymnasium import spaces
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
+    vector = isinstance(policy.observation_space, spaces.Box) and len(policy.observation_space.shape) == 1
+    if not vector and dict_keys_of(policy) is None:
+        return None
     for net in (policy.actor, policy.critic):
-        if not isinstance(getattr(net, "features_extractor", None), FlattenExtractor):
+        if vector and not isinstance(getattr(net, "features_extractor", None), FlattenExtractor):
             return None
         opt = net.optimizer
         group = opt.param_groups[0]
@@ -212,8 +248,6 @@ def supported_networks(policy, flat_actor: bool = True) -> tuple[list[_Layer] | 
             return None
         if group.get("capturable") or group.get("fused"):  # their step counts live on the device; ours on the host
             return None
-    if not isinstance(policy.observation_space, spaces.Box) or len(policy.observation_space.shape) != 1:
-        return None
     critic_layers = [parse_bn_mlp(q) for q in policy.critic.q_networks]
     if any(layers is None for layers in critic_layers):
         return None
@@ -245,6 +279,7 @@ class FastUpdater(Updater):
             for q_net, layers in zip(policy.critic.q_networks, critic_layers, strict=True)
         ]
         self.critic_net = self.critic_nets[0]  # Q_1, the one the actor ascends
+        self.dict_keys = dict_keys_of(policy)  # Dict observations: concatenated as the features extractor does
         # actor_proximal: pi_old = the actor at the start of the update (eval mode), as frozen folded affines
         self.old_actor_affines = None
         if settings.actor_proximal > 0 and self.actor_net is not None:
@@ -271,12 +306,14 @@ class FastUpdater(Updater):
         if self.actor_net is None:  # an actor fitted by autograd: its mean action, from the module
             self.policy.actor.set_training_mode(False)
             return self.policy.actor(obs)
-        return self.actor_net.eval_forward(obs.float().t()).t()
+        # contiguous as the module's output: noise drawn like it (TD3's target smoothing, randn_like) fills the same
+        # elements with the same draws as on the autograd path
+        return self.actor_net.eval_forward(flat_observations(obs, self.dict_keys).float().t()).t().contiguous()
 
     @th.no_grad()
     def critic(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
         """Q_1..Q_n combined (``critic_target``) in eval mode, (N, 1) like ``policy.critic.target_q(obs, actions, how)``."""
-        inputs = th.cat([obs.float(), actions], dim=1).t()
+        inputs = th.cat([flat_observations(obs, self.dict_keys).float(), actions], dim=1).t()
         return combine_critics([net.eval_forward(inputs) for net in self.critic_nets], self.settings.critic_target).t()
 
     @th.no_grad()
@@ -287,6 +324,7 @@ class FastUpdater(Updater):
         if self.fresh_bn_statistics(self.policy.critic):
             for net in nets:
                 net.reset_bn_counts()
+        obs = flat_observations(obs, self.dict_keys)
         inputs = th.cat([obs.float(), actions], dim=1).t().contiguous()  # feature-major (obs + act, N)
         q_t, c_t = q_targets.reshape(1, -1), weights.reshape(1, -1)
         n_full = inputs.shape[1]
@@ -323,7 +361,7 @@ class FastUpdater(Updater):
             return th.zeros(())
         if self.fresh_bn_statistics(self.policy.actor):
             net.reset_bn_counts()
-        obs_t = obs.float().t().contiguous()
+        obs_t = flat_observations(obs, self.dict_keys).float().t().contiguous()
         action_dim = net.spec.sizes[-1]
         critic_affines = self.critic_net.eval_affines()
         w_first, b_first = critic_affines[0]

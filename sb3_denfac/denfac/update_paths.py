@@ -79,7 +79,10 @@ def make_updater(
     refusal = _options_refusal(settings) or _device_refusal(policy)
     layers = supported_networks(policy, flat_actor=classes.fast.flat_actor) if refusal is None else None
     if refusal is None and layers is None:
-        refusal = "update_path='fast' needs vector observations, the default MLP networks and Adam"
+        refusal = (
+            "update_path='fast' needs vector observations (or a Dict of them with SB3's CombinedExtractor), the default "
+            "MLP networks and Adam"
+        )
     if refusal is None:
         return UpdaterChoice(classes.fast(policy, settings, *layers), None)  # type: ignore[misc]
     if update_path == "fast":
