@@ -106,10 +106,11 @@ class DENFAC(
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
     :param update_path: the :class:`~sb3_denfac.denfac.updaters.Updater` of Algorithm 1: "fast"
-        (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations, the
-        default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or
-        "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
-        ``benchmarks/results/update_cost/``). Models saved with the removed "compiled" path load with "fast".
+        (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations or a
+        Dict of 1-D Boxes, the default MLP networks and Adam), "plain"
+        (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or "auto" (default: "fast" where it applies).
+        Both compute the same update up to float rounding (cost: ``benchmarks/results/update_cost/``). Models saved
+        with the removed "compiled" path load with "fast".
         Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; or a dict ``on`` (one of those),
