@@ -25,8 +25,9 @@ import numpy as np
 import pandas as pd
 
 from benchmarks import store
+from benchmarks.stats import median_reached
 from benchmarks.suites import ALGOS, ROBOTICS_ENVS, SUITES
-from benchmarks.tables import missing_cells
+from benchmarks.tables import env_order, missing_cells, provenance, provenance_line
 
 _HERE = Path(__file__).resolve().parent
 LEVEL = 0.9  # the success rate the issue counts episodes to
@@ -80,11 +81,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
                 "gradient_steps": record.get("gradient_steps"),
                 "timesteps": record["timesteps"],
                 "episodes": record["n_episodes"],
-                "machine": "{cpu_model} ({nproc} cores)".format_map(
-                    {"cpu_model": "?", "nproc": "?", **(record.get("machine") or {})}
-                ),
-                "commit": ((record.get("git") or {}).get("commit") or "")[:7],
-                "load": max((record.get("load_average") or {}).get("end") or [float("nan")]),
+                **provenance(record),
             }
         )
     return pd.DataFrame(evals), pd.DataFrame(runs)
@@ -92,18 +89,7 @@ def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
 
 def _envs(frame: pd.DataFrame) -> list[str]:
     """The envs of ``frame``: the suite's in its order, then any other."""
-    present = set(frame["env"])
-    return [e for e in ROBOTICS_ENVS if e in present] + sorted(present - set(ROBOTICS_ENVS))
-
-
-def median_reached(values: pd.Series) -> float:
-    """The median with a run that never reached the level (NaN) counted as past every other: NaN when half or more
-    did not reach it."""
-    ordered = np.sort(np.where(np.isnan(values.to_numpy(dtype=float)), np.inf, values.to_numpy(dtype=float)))
-    if not len(ordered):
-        return np.nan
-    middle = float(np.median(ordered))
-    return middle if np.isfinite(middle) else np.nan
+    return env_order(frame["env"], ROBOTICS_ENVS)
 
 
 def _cell(values: pd.Series, digits: int = 0, per_seed: bool = True) -> str:
@@ -200,9 +186,7 @@ def report(results_dir: str | Path) -> str:
         "Settings: `hyperparams/denfac.yml`, `sac.yml`, `td3.yml` (the envs' entries); DENFAC's schedule for a peer: "
         "train at every episode end, `gradient_steps` = 500, DENFAC's critic steps after a full 50-step episode (the "
         "dial's K_max = 10 fitted iterations of 50; DENFAC takes fewer after the short episodes that end at a goal).\n",
-        f"Machines: {', '.join(sorted(set(runs['machine'])))}; commits: {', '.join(sorted(set(runs['commit'])))}; load "
-        f"average at the runs' ends {runs['load'].min():.1f}-{runs['load'].max():.1f} (CPU seconds are inflated on a busy "
-        "machine: compare them within a table, as ratios).\n",
+        provenance_line(runs),
     ]
     for env in _envs(runs):
         parts += [f"## {env}\n", env_table(runs, env).to_markdown(index=False), ""]

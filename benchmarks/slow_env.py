@@ -252,13 +252,12 @@ def report(runs: list[dict[str, Any]], latency: dict[str, Any], header: dict[str
 
 
 def _median(values: list[Any]) -> float | None:
-    """The median counting a None (not reached) as past everything; None when half or more are None."""
-    ordered = sorted(values, key=lambda v: (v is None, v or 0))
-    middle = ordered[(len(ordered) - 1) // 2] if len(ordered) % 2 else None
-    if len(ordered) % 2 == 0:
-        a, b = ordered[len(ordered) // 2 - 1], ordered[len(ordered) // 2]
-        middle = None if a is None or b is None else (a + b) / 2
-    return middle
+    """The median counting a None (not reached) as past everything (``stats.median_reached``); None when half or more
+    are None."""
+    from benchmarks.stats import median_reached
+
+    middle = median_reached(values)
+    return None if np.isnan(middle) else middle
 
 
 def _cell(values: list[Any], fmt: str) -> str:

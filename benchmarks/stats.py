@@ -21,6 +21,14 @@ EQUAL_MARGIN = (0.25, 0.75)  # "about equal": the whole interval of P(A > B) wit
 MEASURES = {"final_best": "best-so-far at the budget (the paper's measure)", "last10": "mean of the last 10 episodes"}
 
 
+def median_reached(values) -> float:
+    """The median of a measure some runs never reached (None or NaN: "not within the budget"), counting those as past
+    every other: NaN when the middle run (either middle run, for an even count) did not reach it."""
+    array = np.array([np.inf if v is None or v != v else float(v) for v in values], dtype=float)
+    middle = float(np.median(array)) if len(array) else np.nan
+    return middle if np.isfinite(middle) else np.nan
+
+
 @contextlib.contextmanager
 def _seeded() -> Iterator[np.random.RandomState]:
     """A fixed random state for one rliable call. rliable 1.2's stratified bootstraps draw their indices from numpy's

@@ -39,9 +39,30 @@ def row_order(algos) -> list[str]:
     return sorted(set(algos), key=lambda a: (known.index(a) if a in known else len(known), a))
 
 
-def env_order(envs) -> list[str]:
-    known = list(SUITES["figure3"].envs)
+def env_order(envs, known: Sequence[str] | None = None) -> list[str]:
+    """``envs`` without repeats: those of ``known`` (default: the figure3 suite's) in its order, then any other sorted."""
+    known = list(SUITES["figure3"].envs if known is None else known)
     return sorted(set(envs), key=lambda e: (known.index(e) if e in known else len(known), e))
+
+
+def provenance(record: dict[str, Any]) -> dict[str, Any]:
+    """Where a run ran: its machine ("cpu (n cores)"), commit (7 characters) and load average at its end (the highest of
+    the 1, 5 and 15 minutes'), for a report's header (:func:`provenance_line`)."""
+    machine = {"cpu_model": "?", "nproc": "?", **(record.get("machine") or {})}
+    return {
+        "machine": "{cpu_model} ({nproc} cores)".format_map(machine),
+        "commit": ((record.get("git") or {}).get("commit") or "")[:7],
+        "load": max((record.get("load_average") or {}).get("end") or [float("nan")]),
+    }
+
+
+def provenance_line(runs: pd.DataFrame) -> str:
+    """The report header's line on the machines, commits and load of ``runs`` (columns of :func:`provenance`)."""
+    return (
+        f"Machines: {', '.join(sorted(set(runs['machine'])))}; commits: {', '.join(sorted(set(runs['commit'])))}; load "
+        f"average at the runs' ends {runs['load'].min():.1f}-{runs['load'].max():.1f} (CPU seconds are inflated on a busy "
+        "machine: compare them within a table, as ratios).\n"
+    )
 
 
 def _quartiles(values: pd.Series, digits: int = 1) -> str:
