@@ -12,8 +12,8 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.common.utils import update_learning_rate
 
-from sb3_denfac.common.checks import stored_values
 from sb3_denfac.common.docstrings import with_parent_params
+from sb3_denfac.common.model_files import stored_values
 from sb3_denfac.denfac.denfac import DENFAC
 from sb3_denfac.denfac.options import FittedIterations, clip_bootstrap
 from sb3_denfac.denfac.policies import DENFACPolicy
