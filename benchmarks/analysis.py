@@ -200,7 +200,7 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
             f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
         ]
         lines += [f"IQM of the normalised {meaning}:", "", markdown(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
-    for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min"):
+    for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min", "denfac_data_efficient"):
         if denfac not in set(runs["algo"]):
             continue
         rows = []

@@ -204,8 +204,13 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
 
 
 #: Colours: the rows run here bold, the published curves thin and dashed.
-ROW_COLOURS = {"denfac_default": "black", "denfac_data_efficient": "tab:red", "sac_zoo": "tab:blue"}
-OTHER_COLOURS = ("tab:green", "tab:orange", "gold", "teal")
+ROW_COLOURS = {
+    "denfac_default": "black",
+    "denfac_rho2": "tab:orange",
+    "denfac_data_efficient": "tab:red",
+    "sac_zoo": "tab:blue",
+}
+OTHER_COLOURS = ("tab:green", "gold", "teal", "tab:brown")
 FRONTIER_COLOURS = ("tab:cyan", "tab:olive", "tab:purple", "tab:brown", "tab:pink", "tab:gray")
 
 

@@ -91,6 +91,15 @@ ALGOS: dict[str, Algo] = {
         ),  # fmt: skip
         # the compute dial's data-efficient end (sb3_denfac.denfac.presets.DATA_EFFICIENT; configs/)
         Algo("denfac_data_efficient", "denfac", "DENFAC (data-efficient preset)", "paper"),
+        # the dial's middle point: the preset at half its compute (presets.data_efficient(update_to_data_ratio=2))
+        Algo(
+            "denfac_rho2",
+            "denfac",
+            "DENFAC (dial at rho 2)",
+            "paper",
+            base="denfac_data_efficient",
+            overrides=(("update_to_data_ratio", 2.0),),
+        ),  # fmt: skip
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
         Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
@@ -243,6 +252,7 @@ SUITES: dict[str, Suite] = {
                         "denfac_default04",
                         "denfac_soft",
                         "denfac_soft_min",
+                        "denfac_data_efficient",
                         "denfac",
                         "sac",
                         "sac_matched",
@@ -251,9 +261,9 @@ SUITES: dict[str, Suite] = {
                     _FIVE,
                 ),
             ),  # fmt: skip
-            "the default DENFAC (and its soft-actor option) against SB3's SAC and TD3 given DENFAC's schedule (train at "
-            "every episode end, as many critic steps as DENFAC) and SAC at one step per env step; equal episodes, "
-            "gradient steps and CPU reported",
+            "the default DENFAC (and its soft-actor option and data-efficient preset) against SB3's SAC and TD3 given "
+            "DENFAC's schedule (train at every episode end, as many critic steps as DENFAC's default) and SAC at one step "
+            "per env step; equal episodes, gradient steps and CPU reported",
         ),
         Suite(
             "diagnosis",
@@ -279,10 +289,11 @@ SUITES: dict[str, Suite] = {
         Suite(
             "mujoco100k",
             MUJOCO100K_ENVS,
-            ((("denfac_default", "denfac_data_efficient"), _FIVE), (("sac_zoo",), (0, 1))),
+            ((("denfac_default", "denfac_rho2", "denfac_data_efficient"), _FIVE), (("sac_zoo",), (0, 1))),
             "the field's data-efficiency benchmark: Gymnasium MuJoCo at 100k env steps, 10 deterministic evaluation "
-            "episodes every 10k steps; DENFAC's default and its data-efficient preset against SB3 SAC with the RL Zoo's "
-            "MuJoCo settings, with the published 100k-step figures as reference lines",
+            "episodes every 10k steps; DENFAC's compute dial at three points (the default, rho 2, the data-efficient "
+            "preset's rho 4) against SB3 SAC with the RL Zoo's MuJoCo settings, with the published 100k-step figures "
+            "as reference lines",
             study="mujoco100k",
             budgets=tuple((env, MUJOCO100K_BUDGET) for env in MUJOCO100K_ENVS),
         ),

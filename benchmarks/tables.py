@@ -15,8 +15,18 @@ from benchmarks import suites
 from benchmarks.suites import ALGOS, SUITES, Suite, estimated_cost
 from sb3_denfac.envs.facts import env_facts
 
-#: The rows of the user's answer (suite ``matched``): DENFAC's default (and its soft actor) against SAC at each schedule.
-ANSWER_ALGOS = ("denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min", "sac", "sac_matched", "td3_matched")
+#: The rows of the user's answer (suite ``matched``): DENFAC's default (its soft actor, its data-efficient preset) against
+#: SAC at each schedule.
+ANSWER_ALGOS = (
+    "denfac_default",
+    "denfac_default04",
+    "denfac_soft",
+    "denfac_soft_min",
+    "denfac_data_efficient",
+    "sac",
+    "sac_matched",
+    "td3_matched",
+)
 #: Its levels where the env's threshold says little about "learnt the task": Half-Cheetah's 50 is "runs forward at
 #: all", Hopper's 3800 (Gymnasium's) is out of reach in 100 episodes; its 1000 is "survives about the whole episode"
 #: (standing still for 1000 steps earns 1000 of survival bonus), so its cells also give the return beyond that bonus.
