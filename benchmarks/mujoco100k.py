@@ -236,6 +236,7 @@ def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
     envs = _envs(runs)
     ref = frontier_at_budget()
@@ -251,8 +252,10 @@ def plot_cost(evals: pd.DataFrame, runs: pd.DataFrame, path: Path) -> None:
             ax.scatter(r["cpu_time"], r["final"], s=10, color=colours[algo], alpha=0.5)
             ax.scatter([cpu], [r["final"].median()], s=60, color=colours[algo], label=_label(algo), zorder=3)
         ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(env)
-        ax.set_xlabel("CPU s per run")
+        ax.set_xlabel("CPU s per run (log)")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("final evaluation at 100k steps")
     handles, names = _legend_entries(axes[0])

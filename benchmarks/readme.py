@@ -151,7 +151,7 @@ def figure(m: pd.DataFrame, path: Path) -> None:
     plt = plots._plt()
     from matplotlib.ticker import FuncFormatter, NullFormatter
 
-    fig, axes = plt.subplots(2, 4, figsize=(10, 5.8), sharex=True)
+    fig, axes = plt.subplots(2, 4, figsize=(10, 6.2), sharex=True)
     for ax, (key, env, _, title) in zip(axes.flat, PANELS, strict=True):
         budget = suites.budget(env).episodes
         for _, algo, header, color, marker in COLUMNS:
@@ -177,10 +177,10 @@ def figure(m: pd.DataFrame, path: Path) -> None:
     for ax in axes[1]:
         ax.set_xlabel("CPU s per run (log)", fontsize=8)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(COLUMNS), fontsize=8.5, frameon=False)
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8.5, frameon=False)
     fig.suptitle("Median and quartiles over 5 seeds; hollow at the budget (dotted): most runs did not reach the level",
                  fontsize=9)  # fmt: skip
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
