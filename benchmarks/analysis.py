@@ -200,9 +200,10 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
             f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in zip(iqm["iqm"], iqm["low"], iqm["high"], strict=True)
         ]
         lines += [f"IQM of the normalised {meaning}:", "", markdown(iqm[["algo", "runs", "IQM [95% CI]"]]), ""]
-    for denfac in ("denfac", "denfac_default", "denfac_default04", "denfac_soft", "denfac_soft_min", "denfac_data_efficient"):
-        if denfac not in set(runs["algo"]):
-            continue
+    # every DENFAC configuration of the study (DENFAC's or SoftDENFAC's class; the ablation's rows aside) against each
+    # other row
+    mine = [a for a in row_order(runs["algo"]) if a in ALGOS and ALGOS[a].family != "ablation"]
+    for denfac in [a for a in mine if ALGOS[a].zoo_algo in ("denfac", "soft_denfac")]:
         rows = []
         for other in row_order(runs["algo"]):
             if other == denfac:
