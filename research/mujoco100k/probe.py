@@ -139,11 +139,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-every", type=int, default=10_000)
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--out", type=Path, default=HERE / "runs.jsonl")
+    parser.add_argument("--rows-file", type=Path, default=ROWS, help="the rows' YAML file (another study's)")
     args = parser.parse_args(argv)
-    rows = load_rows(ROWS)
+    rows = load_rows(args.rows_file)
     unknown = [r for r in args.rows if r not in rows]
     if unknown:
-        parser.error(f"unknown rows {unknown}; rows.yml has {sorted(rows)}")
+        parser.error(f"unknown rows {unknown}; {args.rows_file} has {sorted(rows)}")
     done = done_cells(args.out)
     for seed in args.seeds:
         for env_id in args.envs:

@@ -27,8 +27,8 @@ from sb3_denfac import DENFAC
 class Joint(DENFAC):
     """DENFAC with one update per step at which episodes ended, of their summed fitted iterations."""
 
-    def _run_updates(self, iterations: list[int]) -> None:
-        super()._run_updates([sum(iterations)])
+    def _run_updates(self, iterations: list[int], reset: bool = False) -> None:
+        super()._run_updates([sum(iterations)], reset)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch as th
+from sb3_contrib.common.torch_layers import BatchRenorm, BatchRenorm1d
 from torch import nn
 
 #: Weight initialisations: "paper" = N(0, 0.01^2) weights and zero biases (authors' code); "default" = PyTorch's.
@@ -38,6 +39,13 @@ def reset_parameters_(module: nn.Module, init: str = "paper") -> None:
     for layer in module.modules():
         if isinstance(layer, (nn.Linear, nn.BatchNorm1d, nn.LayerNorm)):
             layer.reset_parameters()
+        elif isinstance(layer, BatchRenorm):  # sb3-contrib's has no reset_parameters: its initial state
+            layer.ra_mean.zero_()
+            layer.ra_var.fill_(1.0)
+            layer.steps.zero_()
+            with th.no_grad():
+                layer.scale.fill_(1.0)
+                layer.bias.zero_()
     if init == "paper":
         paper_init_(module)
 
@@ -51,6 +59,8 @@ def create_bn_mlp(
     bn_momentum: float = 0.1,
     init: str = "paper",
     layer_norm: bool = False,
+    dropout: float = 0.0,
+    batch_renorm: bool = False,
 ) -> nn.Sequential:
     """Build ``input -> net_arch... -> output`` with a linear output layer and the paper's batch-norm placement.
 
@@ -63,6 +73,11 @@ def create_bn_mlp(
     :param init: "paper" (N(0, 0.01^2) weights, zero biases) or "default" (PyTorch's initialisation).
     :param layer_norm: LayerNorm after every hidden linear layer, before its activation (Ba et al. 2016; the critics of
         DroQ, BRO and sbx's ``layer_norm``): each hidden layer's pre-activations keep unit scale however long the fit.
+    :param dropout: rate of a Dropout after every hidden linear layer, before its layer norm (DroQ, Hiraoka et al.
+        2022: ``Linear -> Dropout -> LayerNorm -> ReLU``); 0: none. Active in train mode only.
+    :param batch_renorm: batch renormalisation (Ioffe 2017; sb3-contrib's ``BatchRenorm1d``: momentum 0.01, batch
+        statistics for its first 100k training steps, then the running ones corrected towards the batch's) before
+        every linear layer, the last one's too (CrossQ's critic, Bhatt et al. 2024), in place of ``batch_norm``.
     """
     if init not in INITS:
         raise ValueError(f"init must be one of {INITS}, got {init!r}")
@@ -72,9 +87,13 @@ def create_bn_mlp(
     layers: list[nn.Module] = []
     for i in range(len(sizes) - 1):
         is_last = i == len(sizes) - 2
-        if batch_norm and not is_last:
+        if batch_renorm:  # CrossQ's placement: before every linear layer, the output's too
+            layers.append(BatchRenorm1d(sizes[i]))
+        elif batch_norm and not is_last:
             layers.append(nn.BatchNorm1d(sizes[i], momentum=bn_momentum))
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if dropout > 0 and not is_last:
+            layers.append(nn.Dropout(dropout))
         if layer_norm and not is_last:
             layers.append(nn.LayerNorm(sizes[i + 1]))
         if not is_last:

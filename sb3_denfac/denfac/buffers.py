@@ -47,6 +47,13 @@ def take(x: th.Tensor | dict[str, th.Tensor], rows: th.Tensor | None) -> Any:
     return {key: value[rows] for key, value in x.items()} if isinstance(x, dict) else x[rows]
 
 
+def stack_rows(x: th.Tensor | dict[str, th.Tensor], y: th.Tensor | dict[str, th.Tensor]) -> Any:
+    """The rows of ``x`` then those of ``y`` (tensors, or dicts of tensors with the same keys)."""
+    if isinstance(x, dict):
+        return {key: th.cat([value, y[key]]) for key, value in x.items()}  # type: ignore[index]
+    return th.cat([x, y])  # type: ignore[list-item]
+
+
 def n_rows(x: th.Tensor | dict[str, th.Tensor]) -> int:
     """The number of rows of a tensor or of a dict of tensors."""
     return int(next(iter(x.values())).shape[0]) if isinstance(x, dict) else int(x.shape[0])

@@ -7,6 +7,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
+from sb3_contrib.common.torch_layers import BatchRenorm
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
@@ -129,6 +130,15 @@ class DENFAC(
         their average) or "min" (clipped double Q, 0.4's default)
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
         (:mod:`~.options`; default False, paper: no bound)
+    :param frozen_targets: True (default, Algorithm 1): eq. (4)'s targets come from Q_{k-1}, computed once per fitted
+        iteration and held for its ``critic_steps``; False: CrossQ's bootstrapping without a target network (Bhatt et
+        al. 2024): every critic step computes Q(s, a) and Q(s', a') in one train-mode forward pass of the critic it
+        fits (its batch statistics over both), the bootstrap value detached; a' is pi_{k-1}(s') as above, fixed over
+        the iteration (the actor only moves after the critic's steps). Meant with ``policy_kwargs=dict(batch_renorm=True)``
+        (:class:`~.policies.DENFACCritic`); the autograd updater only
+    :param reset_every: re-initialise the actor and the critic, with fresh Adam states, at the first update at or past
+        every ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high
+        update-to-data ratios: SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
         the last published policy plays (:mod:`~.learner`: what changes; default False: the update runs between
         episodes, reproducible from the seed)
@@ -156,6 +166,8 @@ class DENFAC(
     updater_classes: ClassVar[UpdaterClasses] = DENFAC_UPDATERS
     policy: DENFACPolicy
     replay_buffer: BehaviourMeansBuffer  # type: ignore[assignment]
+    #: periodic resets made so far (``reset_every``)
+    _resets_done: int = 0
     #: the last update's statistics (:class:`UpdateStats`), None before the first
     last_update: UpdateStats | None = None
     #: the last updates' statistics: the 2 n_envs last, at least all those since the previous env step (several envs'
@@ -192,6 +204,8 @@ class DENFAC(
         critic_target: str = "mean",
         bootstrap_bounds: bool = False,
         async_update: bool = False,
+        frozen_targets: bool = True,
+        reset_every: int | None = None,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -281,11 +295,20 @@ class DENFAC(
         if not lengths:
             return  # several envs: no episode ended at this step
         self._update_learning_rates()  # alpha_a and alpha_c at the current progress (ActorCriticRatesMixin)
-        uses_batch_norm = any(isinstance(m, th.nn.modules.batchnorm._BatchNorm) for m in self.policy.modules())
+        uses_batch_norm = any(isinstance(m, (th.nn.modules.batchnorm._BatchNorm, BatchRenorm)) for m in self.policy.modules())
         if uses_batch_norm and self.replay_buffer.size() < 2:
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
         k = self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio
-        self._run_updates([fitted_iterations(*k, n) for n in lengths])  # here or on the learner thread (learner.py)
+        iterations = [fitted_iterations(*k, n) for n in lengths]
+        self._run_updates(iterations, reset=self._reset_due())  # here or on the learner thread (learner.py)
+
+    def _reset_due(self) -> bool:
+        """Whether this update starts from re-initialised networks (``reset_every``): the first at or past each multiple
+        of ``reset_every`` env steps; counts it."""
+        if self.reset_every is None or self.num_timesteps < (self._resets_done + 1) * self.reset_every:
+            return False
+        self._resets_done = self.num_timesteps // self.reset_every
+        return True
 
     def make_updater(self, policy: DENFACPolicy | None = None) -> Updater:
         """The next update's updater of ``policy`` (default: the model's): one of :attr:`updater_classes`, as
@@ -326,7 +349,14 @@ class DENFAC(
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
                 updater.reset_critic()
-            critic_loss = updater.fit_critic(o, a, q_targets, weights, None if sample is None else sample.critic_batches)
+            batches = None if sample is None else sample.critic_batches
+            if self.frozen_targets:
+                critic_loss = updater.fit_critic(o, a, q_targets, weights, batches)
+            else:  # CrossQ: each step bootstraps from the critic it fits, at the iteration's next actions
+                with th.no_grad():
+                    next_actions = self._target_actions(updater, o2)
+                discounts = self.gamma * (1.0 - done)
+                critic_loss = updater.fit_critic_joint(o, a, o2, next_actions, r, discounts, weights, batches, bounds)
             if self.reset_actor:
                 updater.reset_actor()
             if sample is None or sample.actor_rows is None:

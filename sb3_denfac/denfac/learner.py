@@ -74,26 +74,30 @@ class AsyncUpdateMixin:
     async_update: bool
     _learner: BackgroundLearner | None = None
 
-    def _run_updates(self, iterations: list[int]) -> None:
-        """One update per finished episode, ``iterations[i]`` fitted iterations each, back to back."""
+    def _run_updates(self, iterations: list[int], reset: bool = False) -> None:
+        """One update per finished episode, ``iterations[i]`` fitted iterations each, back to back; with ``reset``, the
+        actor and the critic are re-initialised first (``reset_every``)."""
         if self._learner is None:
             data = self.replay_buffer.all_samples(env=self._vec_normalize_env)  # type: ignore[attr-defined]
-            self._record(self._fit_all(self.policy, data, iterations))  # type: ignore[attr-defined]
+            self._record(self._fit_all(self.policy, data, iterations, reset))  # type: ignore[attr-defined]
             return
         self._publish(wait=True)  # the update still running, if any: at most one in flight
         policy = copy.deepcopy(self.policy)  # type: ignore[attr-defined]
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)  # type: ignore[attr-defined]
-        self._learner.submit(self._fit_in_background, policy, data, iterations)
+        self._learner.submit(self._fit_in_background, policy, data, iterations, reset)
         if budget_reached(self):  # the last update of this learn(): published before learn() returns
             self._publish(wait=True)
 
-    def _fit_all(self, policy: Any, data: Any, iterations: list[int]) -> list[Any]:
+    def _fit_all(self, policy: Any, data: Any, iterations: list[int], reset: bool = False) -> list[Any]:
         """The updates of ``policy`` on D's content ``data``, back to back: a new updater for each, made after the
-        previous one finished."""
+        previous one finished; with ``reset``, ``policy``'s actor and critic re-initialised first."""
+        if reset:
+            policy.reset_actor()
+            policy.reset_critic()
         return [self._fit(self.make_updater(policy), data, n) for n in iterations]  # type: ignore[attr-defined]
 
-    def _fit_in_background(self, policy: Any, data: Any, iterations: list[int]) -> tuple[Any, list[Any]]:
-        return policy, self._fit_all(policy, data, iterations)
+    def _fit_in_background(self, policy: Any, data: Any, iterations: list[int], reset: bool) -> tuple[Any, list[Any]]:
+        return policy, self._fit_all(policy, data, iterations, reset)
 
     def _publish(self, wait: bool) -> None:
         """Make the learner's finished update (``wait``: or the running one, once it ends) the model's policy, and

@@ -54,6 +54,12 @@ class DENFACCritic(BaseModel):
     :param normalize_images: whether to normalise images
     :param n_critics: number of Q networks (paper: 1)
     :param layer_norm: LayerNorm after every hidden layer of each Q network (:func:`~sb3_denfac.common.networks.create_bn_mlp`)
+    :param dropout: Dropout rate after every hidden linear layer of each Q network (DroQ; 0: none)
+    :param batch_renorm: batch renormalisation before every linear layer but the last of each Q network (CrossQ)
+    :param target_subset: REDQ's M (Chen et al. 2021, Algorithm 1): the bootstrap value combines a random subset of M of
+        the ``n_critics`` Q networks, drawn anew at every call of :meth:`target_q` (once per fitted iteration, or per
+        critic step with joint bootstrapping), and the actor ascends the mean of all of them; None: all of them, and
+        the actor ascends Q_1
     """
 
     def __init__(
@@ -70,11 +76,18 @@ class DENFACCritic(BaseModel):
         normalize_images: bool = True,
         n_critics: int = 2,
         layer_norm: bool = False,
+        dropout: float = 0.0,
+        batch_renorm: bool = False,
+        target_subset: int | None = None,
     ):
         super().__init__(
             observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
         )
         n_critics = check_number("n_critics", n_critics, minimum=1, integer=True, note=" (1: one critic, as the paper)")
+        self.target_subset = check_number(
+            "target_subset", target_subset, minimum=1, maximum=n_critics, integer=True, none_ok=True,
+            note=" (REDQ's M, at most n_critics; None: all the Q networks)",
+        )  # fmt: skip
         action_dim = get_action_dim(self.action_space)
 
         def q_network() -> nn.Sequential:
@@ -85,8 +98,10 @@ class DENFACCritic(BaseModel):
                 batch_norm,
                 activation_fn,
                 bn_momentum,
-                init,
-                layer_norm,  # type: ignore[arg-type]
+                init,  # type: ignore[arg-type]
+                layer_norm,
+                dropout,
+                batch_renorm,
             )
 
         self.n_critics = n_critics
@@ -108,13 +123,23 @@ class DENFACCritic(BaseModel):
         return [q_net(inputs) for q_net in self.q_networks]
 
     def forward(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
-        """Q_1(s, a), shape (N, 1): the value the actor ascends (SB3's ``q1_forward``)."""
-        return self.qf(self.q_inputs(obs, actions))
+        """The value the actor ascends (eq. 5), shape (N, 1): Q_1(s, a) (SB3's ``q1_forward``), or with
+        ``target_subset`` the mean of Q_1, ..., Q_n (REDQ)."""
+        if self.target_subset is None:
+            return self.qf(self.q_inputs(obs, actions))
+        return th.stack(self.all_q(obs, actions)).mean(dim=0)
 
     def target_q(self, obs: th.Tensor, actions: th.Tensor, how: str) -> th.Tensor:
-        """The bootstrap value of the targets of eq. (4), shape (N, 1): Q_1, ..., Q_n combined by
-        :func:`combine_critics` (``how`` "min": clipped double Q)."""
-        return combine_critics(self.all_q(obs, actions), how)
+        """The bootstrap value of the targets of eq. (4), shape (N, 1): :meth:`combine` of Q_1(s, a), ..., Q_n(s, a)."""
+        return self.combine(self.all_q(obs, actions), how)
+
+    def combine(self, values: list[th.Tensor], how: str) -> th.Tensor:
+        """``values`` of Q_1, ..., Q_n combined by :func:`combine_critics` (``how`` "min": clipped double Q), over a
+        random subset of ``target_subset`` of them if set (REDQ: drawn anew at every call)."""
+        if self.target_subset is not None and self.target_subset < len(values):
+            chosen = th.randperm(len(values))[: self.target_subset].tolist()
+            values = [values[i] for i in chosen]
+        return combine_critics(values, how)
 
 
 #: How several Q networks make the bootstrap value of eq. (4) (DENFAC's ``critic_target``).
@@ -156,6 +181,14 @@ class DENFACBasePolicy(BasePolicy):
     :param n_critics: Q networks of the critic (default 2: clipped double Q, see :class:`DENFACCritic`; paper: 1)
     :param layer_norm: LayerNorm after every hidden layer of the critic's Q networks (default False; sbx's SAC
         ``layer_norm``, the critics of DroQ and BRO): keeps the values' regression well scaled over many fitted steps
+    :param dropout: Dropout rate after every hidden linear layer of the critic's Q networks (default 0; DroQ, Hiraoka
+        et al. 2022: 0.01 with ``layer_norm``, sbx's ``dropout_rate``)
+    :param batch_renorm: batch renormalisation (sb3-contrib's ``BatchRenorm1d``) before every linear layer but the
+        last of the critic's Q networks (default False; CrossQ's critic, Bhatt et al. 2024, with DENFAC's
+        ``frozen_targets=False``)
+    :param target_subset: REDQ's M (default None; Chen et al. 2021: M = 2 of ``n_critics`` = 10): the bootstrap value
+        takes the minimum (``critic_target``) over a random subset of M Q networks, and the actor ascends the mean of
+        all of them (:class:`DENFACCritic`)
     """
 
     actor: nn.Module
@@ -181,6 +214,9 @@ class DENFACBasePolicy(BasePolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
         n_critics: int = 2,
         layer_norm: bool = False,
+        dropout: float = 0.0,
+        batch_renorm: bool = False,
+        target_subset: int | None = None,
     ):
         super().__init__(
             observation_space,
@@ -214,7 +250,17 @@ class DENFACBasePolicy(BasePolicy):
         )
         self.actor_kwargs = {**common, "net_arch": archs["pi"], "sigma": sigma}
         self.layer_norm = check_bool("layer_norm", layer_norm)
-        self.critic_kwargs = {**common, "net_arch": archs["qf"], "n_critics": n_critics, "layer_norm": self.layer_norm}
+        self.dropout = check_number("dropout", dropout, minimum=0.0, maximum=0.9, note=" (0: none; DroQ: 0.01)")
+        self.batch_renorm = check_bool("batch_renorm", batch_renorm)
+        self.critic_kwargs = {
+            **common,
+            "net_arch": archs["qf"],
+            "n_critics": n_critics,
+            "layer_norm": self.layer_norm,
+            "dropout": self.dropout,
+            "batch_renorm": self.batch_renorm,
+            "target_subset": target_subset,
+        }
         self._build(lr_schedule)
 
     def _build(self, lr_schedule: Schedule) -> None:
@@ -251,6 +297,9 @@ class DENFACBasePolicy(BasePolicy):
                 features_extractor_kwargs=self.features_extractor_kwargs,
                 n_critics=self.critic.n_critics,  # validated by the critic
                 layer_norm=self.layer_norm,
+                dropout=self.dropout,
+                batch_renorm=self.batch_renorm,
+                target_subset=self.critic.target_subset,
             )
         )
         return data

@@ -57,6 +57,8 @@ SETTINGS = (
     "critic_target",
     "bootstrap_bounds",
     "async_update",
+    "frozen_targets",
+    "reset_every",
     "torch_threads",
 )
 
@@ -86,8 +88,17 @@ def check_settings(arguments: dict[str, Any]) -> dict[str, Any]:
         critic_target=check_choice("critic_target", a["critic_target"], CRITIC_TARGETS),
         torch_threads=check_torch_threads(a["torch_threads"]),
         actor_proximal=check_number("actor_proximal", a["actor_proximal"], minimum=0.0, note=" (0: off)"),
+        reset_every=check_number("reset_every", a["reset_every"], minimum=1, integer=True, none_ok=True, note=" (env steps)"),
     )
-    flags = ("reset_critic", "reset_actor", "inverting_gradients", "bootstrap_on_timeout", "bootstrap_bounds", "async_update")
+    flags = (
+        "reset_critic",
+        "reset_actor",
+        "inverting_gradients",
+        "bootstrap_on_timeout",
+        "bootstrap_bounds",
+        "async_update",
+        "frozen_targets",
+    )
     for name in flags:
         settings[name] = check_bool(name, a[name])
     # one argument, kept as four attributes (what FitSettings reads, and what files of every version saved)

@@ -35,6 +35,8 @@ def _options_refusal(settings: FitSettings) -> str | None:
     """Why the fast updater cannot carry out these settings (an option only the autograd updater implements), or None."""
     if settings.prioritized != "none":
         return f"update_path='fast' does not support prioritized={settings.prioritized!r}: use update_path='auto' or 'plain'"
+    if not settings.frozen_targets:
+        return "update_path='fast' does not support frozen_targets=False (CrossQ): use update_path='auto' or 'plain'"
     return None
 
 
@@ -78,6 +80,8 @@ def make_updater(
         return UpdaterChoice(classes.plain(policy, settings), None)
     refusal = _options_refusal(settings) or _device_refusal(policy)
     layers = supported_networks(policy, flat_actor=classes.fast.flat_actor) if refusal is None else None
+    if refusal is None and getattr(policy.critic, "target_subset", None) is not None:
+        refusal = "update_path='fast' does not support the critic's target_subset (REDQ): use update_path='auto' or 'plain'"
     if refusal is None and layers is None:
         refusal = (
             "update_path='fast' needs vector observations (or a Dict of them with SB3's CombinedExtractor), the default "

@@ -12,6 +12,9 @@
   targets are computed on the rows they read only (None: full batch, or prioritised sampling);
 - ``fit_critic(s, a, q, c, batches)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for
   each Q network, on the same mini-batches (``batches``, or drawn by the updater);
+- ``fit_critic_joint(s, a, s', a', r, g, c, batches, bounds)``: with ``frozen_targets=False``, the same steps, each
+  bootstrapping from the critic it fits: q = r + g clip(Q(s', a')) from one train-mode forward pass of (s, a) and
+  (s', a') together, detached (CrossQ); the autograd updater only;
 - ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
   (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
   :class:`~sb3_denfac.soft_denfac.SoftDENFAC`'s updaters fit SAC's actor and temperature instead;
@@ -37,8 +40,8 @@ from torch import nn
 from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.common.inverting_gradients import inverting_gradient_actor_backward
-from sb3_denfac.denfac.buffers import n_rows, take
-from sb3_denfac.denfac.options import PrioritisedSampler, proximal_actor_backward
+from sb3_denfac.denfac.buffers import n_rows, stack_rows, take
+from sb3_denfac.denfac.options import PrioritisedSampler, clip_bootstrap, proximal_actor_backward
 
 
 @dataclass(frozen=True)
@@ -58,6 +61,7 @@ class FitSettings:
     priority_eps: float
     actor_proximal: float  # lambda of the proximal actor loss (0: plain ascent of eq. 5)
     critic_target: str  # how several Q networks make the bootstrap value: "min" or "mean" (combine_critics)
+    frozen_targets: bool  # False: every critic step bootstraps from the critic it fits (fit_critic_joint)
 
     @staticmethod
     def of(model: Any) -> FitSettings:
@@ -75,6 +79,7 @@ class FitSettings:
             priority_eps=model.priority_eps,
             actor_proximal=model.actor_proximal,
             critic_target=model.critic_target,
+            frozen_targets=model.frozen_targets,
         )
 
 
@@ -193,6 +198,23 @@ class Updater(ABC):
         """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2, step i on the rows ``batches[i]`` (None: the full
         batch, or mini-batches it draws itself); returns the last step's loss."""
 
+    def fit_critic_joint(
+        self,
+        obs: th.Tensor,
+        actions: th.Tensor,
+        next_obs: th.Tensor,
+        next_actions: th.Tensor,
+        rewards: th.Tensor,
+        discounts: th.Tensor,
+        weights: th.Tensor,
+        batches: th.Tensor | None,
+        bounds: tuple[float, float] | None,
+    ) -> th.Tensor:
+        """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2 with q = r + g clip(Q(s', a')) recomputed at every
+        step by the critic being fitted (``frozen_targets=False``), ``discounts`` g = gamma (1 - d); returns the last
+        step's loss."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement frozen_targets=False")
+
     @abstractmethod
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         """G Adam steps ascending 1/N sum Q(s, pi(s)) with the critic in eval mode, step i on the rows ``batches[i]``
@@ -273,6 +295,43 @@ class AutogradUpdater(Updater):
                 losses.append((errors if w is None else w * errors).mean())
             sum(losses).backward()
             if settings.max_grad_norm is not None:  # each Q network's own norm, as if it were alone
+                for group in self.clip_groups:
+                    clip_grad_norm_(group, settings.max_grad_norm)
+            critic.optimizer.step()
+            loss = losses[0]
+        critic.set_training_mode(False)
+        return loss.detach()
+
+    def fit_critic_joint(
+        self,
+        obs: th.Tensor,
+        actions: th.Tensor,
+        next_obs: th.Tensor,
+        next_actions: th.Tensor,
+        rewards: th.Tensor,
+        discounts: th.Tensor,
+        weights: th.Tensor,
+        batches: th.Tensor | None,
+        bounds: tuple[float, float] | None,
+    ) -> th.Tensor:
+        critic, settings = self.policy.critic, self.settings
+        self.fresh_bn_statistics(critic)
+        critic.set_training_mode(True)
+        loss = th.zeros(())
+        for step in range(settings.critic_steps):
+            idx = batches[step] if batches is not None else self.batch_indices(n_rows(obs))
+            o, a, o2, a2 = take(obs, idx), take(actions, idx), take(next_obs, idx), take(next_actions, idx)
+            r, g, c = take(rewards, idx), take(discounts, idx), take(weights, idx)
+            n = n_rows(o)
+            critic.optimizer.zero_grad(set_to_none=True)
+            # one forward pass of (s, a) and (s', a') together: the batch statistics of both (CrossQ)
+            values = critic.all_q(stack_rows(o, o2), th.cat([a, a2]))
+            with th.no_grad():
+                next_q, _ = clip_bootstrap(critic.combine([v[n:] for v in values], settings.critic_target), bounds)
+                q = r + g * next_q
+            losses = [(c * (v[:n] - q).pow(2)).mean() for v in values]
+            sum(losses).backward()
+            if settings.max_grad_norm is not None:
                 for group in self.clip_groups:
                     clip_grad_norm_(group, settings.max_grad_norm)
             critic.optimizer.step()
