@@ -11,6 +11,7 @@ from sb3_contrib.common.torch_layers import BatchRenorm1d
 from torch import nn
 
 from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.common.networks import ResidualBlock
 from sb3_denfac.denfac.buffers import n_rows
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
@@ -40,8 +41,10 @@ def test_critic_layers_of_droq_and_crossq():
     assert layer_types(droq) == [nn.Linear, nn.Dropout, nn.LayerNorm, nn.LeakyReLU] * 2 + [nn.Linear]
     crossq = make(policy_kwargs=dict(batch_renorm=True)).critic.qf
     assert layer_types(crossq) == [BatchRenorm1d, nn.Linear, nn.LeakyReLU] * 2 + [BatchRenorm1d, nn.Linear]  # CrossQ
-    actor = make(policy_kwargs=dict(batch_renorm=True, dropout=0.01)).actor
-    assert not any(isinstance(m, (BatchRenorm1d, nn.Dropout)) for m in actor.modules())  # critic options only
+    simba = make(policy_kwargs=dict(residual=True)).critic.qf
+    assert layer_types(simba) == [nn.Linear, ResidualBlock, ResidualBlock, nn.LayerNorm, nn.Linear]
+    actor = make(policy_kwargs=dict(batch_renorm=True, dropout=0.01, residual=True)).actor
+    assert not any(isinstance(m, (BatchRenorm1d, nn.Dropout, ResidualBlock)) for m in actor.modules())  # critic only
 
 
 @pytest.mark.parametrize(
@@ -67,6 +70,7 @@ def test_bad_frontier_settings_are_refused_by_name(kwargs, match):
         (dict(frozen_targets=False), "frozen_targets=False"),
         (dict(policy_kwargs=dict(dropout=0.01)), "default MLP networks"),
         (dict(policy_kwargs=dict(batch_renorm=True)), "default MLP networks"),
+        (dict(policy_kwargs=dict(residual=True)), "default MLP networks"),
     ],
 )
 def test_the_fast_updater_refuses_the_options_it_does_not_implement(kwargs, reason):
@@ -158,8 +162,9 @@ def test_joint_bootstrapping_reads_batch_statistics_of_both_halves():
         dict(critic_target="min", policy_kwargs=dict(n_critics=4, target_subset=2)),
         dict(policy_kwargs=dict(dropout=0.01, layer_norm=True)),
         dict(reset_every=100),
+        dict(policy_kwargs=dict(residual=True)),
     ],
-    ids=["crossq", "redq", "droq", "resets"],
+    ids=["crossq", "redq", "droq", "resets", "simba"],
 )
 def test_each_option_trains_saves_and_reloads(tmp_path, kwargs):
     model = make(**kwargs)
@@ -209,3 +214,12 @@ def test_soft_denfac_takes_the_critic_options():
     )
     model.learn(100)
     assert model.critic.target_subset == 2 and th.isfinite(model.last_update.q_targets).all()
+
+
+def test_soft_denfac_takes_periodic_resets_and_not_the_joint_bootstrap():
+    env = gym.make("Pendulum-v1", max_episode_steps=50)
+    model = SoftDENFAC("MlpPolicy", env, seed=0, reset_every=100, **SMALL)
+    model.learn(150)
+    assert model._resets_done == 1 and model.frozen_targets
+    with pytest.raises(TypeError, match="frozen_targets"):
+        SoftDENFAC("MlpPolicy", env, frozen_targets=False)

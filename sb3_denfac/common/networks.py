@@ -104,6 +104,30 @@ def create_bn_mlp(
     return net
 
 
+class ResidualBlock(nn.Module):
+    """SimBa's pre-layer-norm residual block (Lee et al. 2025): x + W_2 act(W_1 LayerNorm(x)), inner width 4 x dim."""
+
+    def __init__(self, dim: int, activation_fn: type[nn.Module] = nn.ReLU):
+        super().__init__()
+        self.path = nn.Sequential(nn.LayerNorm(dim), nn.Linear(dim, 4 * dim), activation_fn(), nn.Linear(4 * dim, dim))
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        return x + self.path(x)
+
+
+def create_residual_mlp(
+    input_dim: int, output_dim: int, net_arch: Sequence[int], activation_fn: type[nn.Module] = nn.ReLU
+) -> nn.Sequential:
+    """SimBa's network (Lee et al. 2025): a linear embedding to ``net_arch[0]`` units, one :class:`ResidualBlock` per
+    entry of ``net_arch`` (their width is the first entry's: a residual stream keeps one width), a final LayerNorm, and
+    a linear output. PyTorch's initialisation."""
+    if not net_arch or any(int(h) <= 0 for h in net_arch):
+        raise ValueError(f"residual networks need positive hidden layer sizes, got {list(net_arch)}")
+    width = int(net_arch[0])
+    blocks = [ResidualBlock(width, activation_fn) for _ in net_arch]
+    return nn.Sequential(nn.Linear(input_dim, width), *blocks, nn.LayerNorm(width), nn.Linear(width, output_dim))
+
+
 def set_bn_training_mode(module: nn.Module, mode: bool) -> None:
     """Put only the batch-norm layers of ``module`` in train (batch statistics) or eval (running statistics) mode."""
     for layer in module.modules():

@@ -21,7 +21,7 @@ from torch import nn
 
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
 from sb3_denfac.common.checks import check_bool, check_number
-from sb3_denfac.common.networks import create_bn_mlp, reset_parameters_
+from sb3_denfac.common.networks import create_bn_mlp, create_residual_mlp, reset_parameters_
 
 #: ``net_arch`` of :class:`DENFACPolicy` when it is None (paper: pi=[20], qf=[50, 7]).
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [64, 64], "qf": [64, 64]}
@@ -60,6 +60,9 @@ class DENFACCritic(BaseModel):
         the ``n_critics`` Q networks, drawn anew at every call of :meth:`target_q` (once per fitted iteration, or per
         critic step with joint bootstrapping), and the actor ascends the mean of all of them; None: all of them, and
         the actor ascends Q_1
+    :param residual: each Q network is SimBa's residual network (:func:`~sb3_denfac.common.networks.create_residual_mlp`:
+        one pre-layer-norm residual block per entry of ``net_arch``) instead of the MLP; ``batch_norm``, ``layer_norm``,
+        ``dropout``, ``batch_renorm`` and ``init`` do not apply to it
     """
 
     def __init__(
@@ -79,6 +82,7 @@ class DENFACCritic(BaseModel):
         dropout: float = 0.0,
         batch_renorm: bool = False,
         target_subset: int | None = None,
+        residual: bool = False,
     ):
         super().__init__(
             observation_space, action_space, features_extractor=features_extractor, normalize_images=normalize_images
@@ -91,6 +95,8 @@ class DENFACCritic(BaseModel):
         action_dim = get_action_dim(self.action_space)
 
         def q_network() -> nn.Sequential:
+            if residual:
+                return create_residual_mlp(features_dim + action_dim, 1, net_arch, activation_fn)
             return create_bn_mlp(
                 features_dim + action_dim,
                 1,
@@ -189,6 +195,8 @@ class DENFACBasePolicy(BasePolicy):
     :param target_subset: REDQ's M (default None; Chen et al. 2021: M = 2 of ``n_critics`` = 10): the bootstrap value
         takes the minimum (``critic_target``) over a random subset of M Q networks, and the actor ascends the mean of
         all of them (:class:`DENFACCritic`)
+    :param residual: the critic's Q networks are SimBa's residual networks (default False; Lee et al. 2025: a linear
+        embedding, one pre-layer-norm residual block per entry of ``net_arch["qf"]``, a final layer norm)
     """
 
     actor: nn.Module
@@ -217,6 +225,7 @@ class DENFACBasePolicy(BasePolicy):
         dropout: float = 0.0,
         batch_renorm: bool = False,
         target_subset: int | None = None,
+        residual: bool = False,
     ):
         super().__init__(
             observation_space,
@@ -252,6 +261,7 @@ class DENFACBasePolicy(BasePolicy):
         self.layer_norm = check_bool("layer_norm", layer_norm)
         self.dropout = check_number("dropout", dropout, minimum=0.0, maximum=0.9, note=" (0: none; DroQ: 0.01)")
         self.batch_renorm = check_bool("batch_renorm", batch_renorm)
+        self.residual = check_bool("residual", residual)
         self.critic_kwargs = {
             **common,
             "net_arch": archs["qf"],
@@ -260,6 +270,7 @@ class DENFACBasePolicy(BasePolicy):
             "dropout": self.dropout,
             "batch_renorm": self.batch_renorm,
             "target_subset": target_subset,
+            "residual": self.residual,
         }
         self._build(lr_schedule)
 
@@ -300,6 +311,7 @@ class DENFACBasePolicy(BasePolicy):
                 dropout=self.dropout,
                 batch_renorm=self.batch_renorm,
                 target_subset=self.critic.target_subset,
+                residual=self.residual,
             )
         )
         return data

@@ -36,7 +36,8 @@ class SoftDENFAC(DENFAC):
 
     What belongs to DENFAC's deterministic actor is not an argument here: the truncated Gaussian's ``sigma``, the
     importance ``weighting`` of its behaviour density, ``inverting_gradients`` (tanh bounds the actions), the proximal
-    term and TD3's target smoothing. Why a soft actor inside DENFAC and where it stands against the deterministic one:
+    term and TD3's target smoothing; nor is ``frozen_targets`` (the soft targets are computed once per fitted
+    iteration, as eq. (4)'s). Why a soft actor inside DENFAC and where it stands against the deterministic one:
     docs/algorithms.md.
 
     :param ent_coef: alpha, SB3 SAC's ``ent_coef``: "auto" (default; tuned towards ``target_entropy``, from 1),
@@ -85,6 +86,7 @@ class SoftDENFAC(DENFAC):
         ent_coef: str | float = "auto",
         target_entropy: str | float = "auto",
         async_update: bool = False,
+        reset_every: int | None = None,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -134,6 +136,7 @@ class SoftDENFAC(DENFAC):
             critic_target=critic_target,
             bootstrap_bounds=bootstrap_bounds,
             async_update=async_update,
+            reset_every=reset_every,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
             stats_window_size=stats_window_size,
