@@ -89,6 +89,10 @@ def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, 
         from sb3_denfac import DENFAC
 
         model = DENFAC("MlpPolicy", env, seed=seed, **row)
+    elif algo == "soft_denfac":
+        from sb3_denfac import SoftDENFAC
+
+        model = SoftDENFAC("MlpPolicy", env, seed=seed, **row)
     elif algo == "sac":
         from stable_baselines3 import SAC
 
