@@ -17,7 +17,11 @@ the zoo's tables, then the command goes to ``rl_zoo3.train.train``, ``rl_zoo3.en
 - with ``-optimize`` and no ``--storage``, the study is kept in ``sqlite:///<log-folder>/optuna.db`` under the study
   name ``<algo>-<env>`` (``--study-name`` overrides it), so a killed or repeated run resumes the same study; a study
   records its budget (``n_timesteps``) and a run with another budget is refused rather than mixed into it;
-- ``enjoy`` without ``-f`` reads ``logs/`` (``train``'s default) for this package's algorithms;
+- with ``-optimize``, no run folder ``<log-folder>/<algo>/<env>_<n>`` is made (the trials keep their results in the
+  study; the zoo left an empty one, which ``enjoy`` then took for the latest run);
+- ``enjoy`` without ``-f`` reads ``logs/`` (``train``'s default) for this package's algorithms; a run folder without
+  a model is named with the runs that have one (``--exp-id``); without a display it plays with ``--no-render`` and
+  says so (the zoo's ``render_mode="human"`` would open a window; PyBullet's waits for an X server forever);
   ``--trial-id`` reads the same study by default;
 - an entry's ``preset`` (e.g. ``preset: paper``) is expanded (:func:`~sb3_denfac.zoo.config.expand_preset`), after the
   zoo's own reading, so ``-params`` and ``--trial-id`` values override the preset too;
@@ -35,8 +39,10 @@ exploration); SB3's original stays available as ``sb3_ddpg``. SB3's TD3/SAC and 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.util
+import io
 import json
 import os
 import runpy
@@ -161,6 +167,18 @@ class CheckedExperimentManager(ExperimentManager):
             return zoo_samplers.with_entry_policy_kwargs(hyperparams, self._tuned_policy_kwargs())
         return hyperparams
 
+    def create_log_folder(self) -> None:
+        """The run folder ``<log-folder>/<algo>/<env>_<n>`` of a training run. A tuning run makes none: its trials
+        train on envs without logs and keep their results in the study (an empty run folder would be the latest
+        run that ``enjoy`` picks)."""
+        if not self.optimize_hyperparameters:
+            super().create_log_folder()
+
+    def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> Any:
+        """The zoo's envs; with ``-optimize`` none is logged, not even the env the zoo makes to read the action space
+        before the trials (its Monitor file would make the run folder)."""
+        return super().create_envs(n_envs, eval_env=eval_env, no_log=no_log or self.optimize_hyperparameters)
+
     def hyperparameters_optimization(self) -> None:
         if self.algo in zoo_samplers.SAMPLERS:
             self._tuned_policy_kwargs()  # fails before the first trial
@@ -267,6 +285,9 @@ def check_enjoy_folder(argv: Sequence[str], command: str = "enjoy") -> None:
     parser.add_argument("--algo", default="ppo")
     parser.add_argument("--env", default="CartPole-v1")
     parser.add_argument("--exp-id", type=int, default=0)
+    parser.add_argument("--load-best", action="store_true")
+    parser.add_argument("--load-checkpoint", type=int)
+    parser.add_argument("--load-last-checkpoint", action="store_true")
     args = parser.parse_known_args(argv)[0]
     if "rl-trained-agents" in args.folder:
         return
@@ -292,6 +313,45 @@ def check_enjoy_folder(argv: Sequence[str], command: str = "enjoy") -> None:
                 f"{command}: {what} of {args.algo} on {args.env} was not found in {str(algo_folder)!r} (found: "
                 f"{', '.join(others) or 'nothing'}); check --env and --exp-id (0: the latest run)"
             )
+        _check_run_has_a_model(args, command)
+
+
+def _model_path(args: argparse.Namespace, exp_id: int) -> tuple[str | None, str]:
+    """The model file the zoo would load for run ``exp_id`` (rl_zoo3's ``get_model_path``, with the load options of
+    ``args``), or None and the zoo's reason."""
+    from huggingface_sb3 import EnvironmentName
+    from rl_zoo3.utils import get_model_path
+
+    load = (args.load_best, args.load_checkpoint, args.load_last_checkpoint)
+    with contextlib.redirect_stdout(io.StringIO()):  # it prints "Loading latest experiment"; the zoo prints it again
+        try:
+            return get_model_path(exp_id, args.folder, args.algo, EnvironmentName(args.env), *load)[1], ""
+        except (AssertionError, ValueError) as e:
+            return None, str(e)
+
+
+def _check_run_has_a_model(args: argparse.Namespace, command: str) -> None:
+    """Fail, naming the run folder and the runs that have one, if the run to play holds no model (a run stopped before
+    it saved one; earlier versions' ``optimize`` also left empty run folders), instead of the zoo's traceback."""
+    from huggingface_sb3 import EnvironmentName
+    from rl_zoo3.utils import get_latest_run_id
+
+    algo_folder = Path(args.folder) / args.algo
+    env_name = EnvironmentName(args.env)
+    exp_id = args.exp_id or get_latest_run_id(str(algo_folder), env_name)
+    model, reason = _model_path(args, exp_id)
+    if model is not None:
+        return
+    suffixes = (p.name.rsplit("_", 1)[-1] for p in algo_folder.glob(f"{env_name}_*"))
+    ids = sorted((int(suffix) for suffix in suffixes if suffix.isdigit()), reverse=True)
+    with_model = [i for i in ids if i != exp_id and _model_path(args, i)[0] is not None]
+    run = f"{'the latest run' if args.exp_id == 0 else 'the run'} {str(algo_folder / f'{env_name}_{exp_id}')!r}"
+    hint = (
+        f"pass --exp-id {with_model[0]} (runs with a model: {', '.join(map(str, with_model))})"
+        if with_model
+        else f"no other run of {args.algo} on {args.env} in {str(algo_folder)!r} has one: train first"
+    )
+    raise ZooConfigError(f"{command}: {run} holds no model to load ({reason}); {hint}")
 
 
 #: ``train``'s default log folder (rl_zoo3's ``-f``), where ``enjoy`` looks for this package's algorithms by default.
@@ -312,12 +372,33 @@ def with_default_folder(argv: Sequence[str]) -> list[str]:
     return argv
 
 
+def has_display() -> bool:
+    """Whether a window can be opened: on Linux, an X or Wayland display is set (``DISPLAY``, ``WAYLAND_DISPLAY``)."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def without_display(argv: Sequence[str]) -> list[str]:
+    """``enjoy``'s argv with ``--no-render`` added, and a note on stderr, when there is no display (:func:`has_display`):
+    the zoo's ``render_mode="human"`` would open a window (PyBullet's, for panda-gym, waits on the X server forever)."""
+    argv = list(argv)
+    if "--no-render" in argv or any(a in ("-h", "--help") for a in argv) or has_display():
+        return argv
+    print(
+        "sb3-denfac-zoo enjoy: no display (DISPLAY is not set): playing without rendering (--no-render); to see the "
+        "agent without a display, write a video: sb3-denfac-zoo record_video",
+        file=sys.stderr,
+    )
+    return [*argv, "--no-render"]
+
+
 def enjoy(argv: Sequence[str]) -> None:
     from rl_zoo3.enjoy import enjoy as zoo_enjoy
 
     argv = with_default_folder(argv)
     check_enjoy_folder(argv)
-    _run_with_argv("sb3-denfac-zoo enjoy", with_default_threads(argv), zoo_enjoy)
+    _run_with_argv("sb3-denfac-zoo enjoy", with_default_threads(without_display(argv)), zoo_enjoy)
 
 
 def record_video(argv: Sequence[str]) -> None:
