@@ -81,6 +81,45 @@ def test_enjoy_with_a_missing_folder_names_it(tmp_path: Path) -> None:
     assert "Pendulum-v1_2" in message and "Pendulum-v1_1" in message
 
 
+def test_enjoy_names_a_run_folder_without_a_model(tmp_path: Path) -> None:
+    """A run folder without a model (a run stopped before it saved one; earlier versions' optimize made empty ones) is
+    named with the runs that have one, instead of the zoo's traceback."""
+    import gymnasium as gym
+
+    from sb3_denfac import CMAES
+
+    env_id, logs = "sb3_denfac/ContinuousCartPole-v0", tmp_path / "logs"
+    name = env_id.replace("/", "-")
+    (logs / "cmaes" / f"{name}_1").mkdir(parents=True)
+    CMAES("MlpPolicy", gym.make(env_id, max_episode_steps=10), population_size=2).save(logs / "cmaes" / f"{name}_1" / name)
+    (logs / "cmaes" / f"{name}_2" / name).mkdir(parents=True)  # what a refused optimize used to leave
+    argv = ["enjoy", "--algo", "cmaes", "--env", env_id, "-f", str(logs), "-n", "5", "--no-render"]
+    message = _zoo_error(*argv)
+    assert f"the latest run '{logs / 'cmaes' / f'{name}_2'}' holds no model" in message
+    assert "pass --exp-id 1" in message
+    assert "--exp-id 1" in _zoo_error(*argv, "--exp-id", "2")
+    assert "has one: train first" in _zoo_error(*argv, "--exp-id", "1", "--load-best")
+    zoo.main([*argv, "--exp-id", "1", "--verbose", "0"])  # the suggested run plays
+
+
+def test_preset_of_another_algorithm_is_refused_by_name() -> None:
+    import gymnasium as gym
+
+    from sb3_denfac import NFAC, SoftDENFAC, presets
+
+    env = gym.make("Pendulum-v1")
+    with pytest.raises(TypeError, match=r"presets\.PAPER is DENFAC's preset, and SoftDENFAC does not take") as error:
+        SoftDENFAC("MlpPolicy", env, **presets.PAPER)
+    for key in ("weighting", "sigma", "actor_proximal", "target_policy_noise"):
+        assert repr(key) in str(error.value)
+    assert "'learning_rate'" not in str(error.value)  # SoftDENFAC takes it
+    with pytest.raises(TypeError, match=r"presets\.PAPER is DENFAC's preset, and NFAC does not take .*'buffer_size'"):
+        NFAC("MlpPolicy", env, **presets.paper(sigma=0.1))
+    with pytest.raises(TypeError, match="unexpected keyword argument 'weighting'"):  # no preset: Python's own error
+        SoftDENFAC("MlpPolicy", env, weighting="retrace")
+    SoftDENFAC("MlpPolicy", env, **presets.DATA_EFFICIENT)  # the keys it takes
+
+
 def test_quickstart_help_is_for_a_user(capsys) -> None:
     with pytest.raises(SystemExit):
         quickstart(["--help"])

@@ -7,6 +7,7 @@ model files and resume: ``test_reliability_model_files.py``; YAML errors: ``test
 from __future__ import annotations
 
 import pathlib
+from copy import deepcopy
 from typing import Any
 
 import gymnasium as gym
@@ -151,6 +152,81 @@ def test_non_finite_inputs_raise(
     with pytest.raises(ValueError, match=message):
         model.learn(3 * episode_steps)
     assert _all_finite(model), "non-finite input reached the weights"
+
+
+@pytest.mark.parametrize(("value", "message"), [(np.nan, "found nan in observations"), (np.inf, "found inf in observations")])
+@pytest.mark.algorithms("all")
+def test_predict_refuses_non_finite_observations(name: str, value: float, message: str, make_env, make_model) -> None:
+    """As ``learn`` does; ``allow_non_finite_predict`` lets them through to the policy."""
+    model = make_model(name)
+    observation = make_env().reset(seed=0)[0]
+    observation[1] = value
+    with pytest.raises(ValueError, match=rf"{message}. Originated from the observation given to \w+\.predict\(\)"):
+        model.predict(observation, deterministic=True)
+    with pytest.raises(ValueError, match=message):
+        model.predict(np.stack([observation, np.zeros_like(observation)]))  # one bad row of a batch
+    model.allow_non_finite_predict = True
+    if name == "soft_denfac":  # SAC's squashed Gaussian: torch's distribution refuses a non-finite mean, as in SB3's SAC
+        with pytest.raises(ValueError, match="Normal"):
+            model.predict(observation, deterministic=True)
+    else:
+        action, _ = model.predict(observation, deterministic=True)
+        assert action.shape == model.action_space.shape
+
+
+@pytest.mark.algorithms("off_policy")
+def test_replay_buffer_extend_as_sb3s_test(tmp_path: pathlib.Path, name: str, episode_steps, make_model) -> None:
+    """SB3's ``test_save_load_replay_buffer``: the loaded buffer is extended with its own data (for DENFAC: rows
+    without behaviour means), then trained on."""
+    model = make_model(name)
+    model.learn(2 * episode_steps)
+    old_buffer = deepcopy(model.replay_buffer)
+    model.save_replay_buffer(tmp_path / "replay_buffer.pkl")
+    model.replay_buffer = None
+    model.load_replay_buffer(tmp_path / "replay_buffer.pkl")
+    size = old_buffer.size()
+    arrays = (old_buffer.observations, old_buffer.next_observations, old_buffer.actions, old_buffer.rewards, old_buffer.dones)
+    model.replay_buffer.extend(*(array[:size] for array in arrays), [[{}] for _ in range(size)])
+    assert model.replay_buffer.size() == 4 * episode_steps
+    model.learn(episode_steps, reset_num_timesteps=False)
+    assert model.replay_buffer.size() == 5 * episode_steps
+
+
+def test_denfac_replay_buffer_takes_sb3_add_without_behaviour_means(tmp_path: pathlib.Path, make_model) -> None:
+    """SB3's add/extend (demonstrations, logged data) without the behaviour means, where no importance weight reads
+    them (the default weighting="none"); the rows are marked unknown, not uniform (NaN: warm-up actions)."""
+    model = make_model("denfac", learning_starts=5)
+    model.learn(20)
+    buffer = model.replay_buffer
+    assert np.isnan(buffer.behaviour_means[:5]).all() and np.isfinite(buffer.behaviour_means[5:20]).all()
+    obs = np.zeros((1, 3), dtype=np.float32)
+    buffer.add(obs, obs, np.zeros((1, 1), dtype=np.float32), np.zeros(1), np.zeros(1), [{}])
+    assert np.isposinf(buffer.behaviour_means[20]).all()
+    model.learn(20, reset_num_timesteps=False)
+    assert model.replay_buffer.size() == 41
+    model.save_replay_buffer(tmp_path / "buffer.pkl")
+
+    # weights that read the means: a row without them is refused, naming the setting, and never weighted as uniform
+    retrace = make_model("denfac", weighting="retrace")
+    retrace.load_replay_buffer(tmp_path / "buffer.pkl")
+    with pytest.raises(ValueError, match=r"1 transitions of the replay buffer were added without behaviour means.*"
+                                         r"weighting='retrace' needs them"):  # fmt: skip
+        retrace.learn(20)
+
+
+@pytest.mark.parametrize("weighting", ["retrace", "retrace_next_state_quirk"])
+def test_denfac_replay_buffer_add_without_behaviour_means_names_the_weighting(weighting: str, make_model) -> None:
+    model = make_model("denfac", weighting=weighting)
+    model.learn(20)
+    buffer = model.replay_buffer
+    with pytest.raises(ValueError, match=rf"add needs the behaviour means mu_b\(s\) with weighting='{weighting}'"):
+        buffer.extend(buffer.observations[:2], buffer.next_observations[:2], buffer.actions[:2], buffer.rewards[:2],
+                      buffer.dones[:2], [[{}], [{}]])  # fmt: skip
+    assert buffer.size() == 20
+    means = buffer.behaviour_means[:2].copy()
+    buffer.add(buffer.observations[0], buffer.next_observations[0], buffer.actions[0], buffer.rewards[0],
+               buffer.dones[0], [{}], behaviour_means=means[0])  # fmt: skip
+    model.learn(20, reset_num_timesteps=False)
 
 
 # ----- the shared check itself (sb3_denfac/common/checks.py), on a tiny SB3 algorithm (CheckedTD3, conftest.py) -------

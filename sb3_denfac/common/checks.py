@@ -6,18 +6,21 @@
   weights into NaN. In-process envs get a gym-level :class:`FiniteCheckWrapper` per sub-env, other VecEnvs SB3's
   :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True`` (see :func:`wrap_check_finite`).
   The same hook refuses an action space that is not a Box with finite bounds with an :class:`UnsupportedSpaceError`
-  (a ``ValueError`` that is also an ``AssertionError``, SB3's type for unsupported spaces).
+  (a ``ValueError`` that is also an ``AssertionError``, SB3's type for unsupported spaces). ``predict`` refuses a
+  NaN/inf observation with the same message, unless ``model.allow_non_finite_predict = True``.
 - :class:`~.model_files.ModelFileCheckMixin` (:mod:`~.model_files`) makes ``load`` refuse a truncated, corrupted or
   missing model file, or one another algorithm saved, with an error naming the problem.
 - :class:`LearnChecksMixin` makes ``learn`` without an environment, or with a replay buffer of another algorithm or
   environment (``load_replay_buffer``), a ``ValueError`` saying so.
-- :class:`InputChecksMixin` is all three; add it as the FIRST base of an algorithm class::
+- :class:`InputChecksMixin` is all three, and refuses a preset of another algorithm given to the constructor by name
+  (:func:`check_preset_keywords`); add it as the FIRST base of an algorithm class::
 
       class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm): ...
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -157,8 +160,30 @@ class FiniteInputsMixin:
     """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (:func:`wrap_check_finite`), see module doc.
 
     Overrides BaseAlgorithm's static ``_wrap_env`` with a classmethod (``self._wrap_env`` and ``cls._wrap_env`` both
-    still work), so the check covers the constructor, ``set_env`` and ``load``.
+    still work), so the check covers the constructor, ``set_env`` and ``load``. ``predict`` refuses a non-finite
+    observation the same way, unless :attr:`allow_non_finite_predict` is set.
     """
+
+    #: True lets ``predict`` take observations holding NaN or inf (the actions are then what the networks make of
+    #: them, often NaN); ``learn`` refuses them regardless. Set it on the model: ``model.allow_non_finite_predict = True``.
+    allow_non_finite_predict: bool = False
+
+    def predict(
+        self,
+        observation: Any,
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        if not self.allow_non_finite_predict:
+            issues = _non_finite("observations", observation)
+            if issues:
+                name = type(self).__name__
+                raise ValueError(
+                    f"found {', found '.join(issues)}. Originated from the observation given to {name}.predict() "
+                    f"(to let non-finite observations through predict, set model.allow_non_finite_predict = True)"
+                )
+        return super().predict(observation, state, episode_start, deterministic)  # type: ignore[misc]
 
     @classmethod
     def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
@@ -210,8 +235,29 @@ class LearnChecksMixin:
         return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
 
 
+def check_preset_keywords(cls: type, keywords: dict[str, Any]) -> None:
+    """Refuse a preset of another algorithm given to ``cls``'s constructor (``SoftDENFAC(..., **presets.PAPER)``) with a
+    ``TypeError`` (Python's type for an unexpected keyword argument) that names the preset, its algorithm and the keys
+    ``cls`` does not take (:func:`~sb3_denfac.denfac.presets.foreign_preset_message`). Other unexpected keywords are
+    left to Python's own TypeError."""
+    parameters = inspect.signature(cls.__init__).parameters  # type: ignore[misc]
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return
+    not_taken = [key for key in keywords if key not in parameters]
+    if not_taken:
+        from sb3_denfac.denfac.presets import foreign_preset_message
+
+        message = foreign_preset_message(cls.__name__, keywords, not_taken)
+        if message is not None:
+            raise TypeError(message)
+
+
 class InputChecksMixin(PolicyNameMixin, FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
     """All checks of this module; put it first in an algorithm's bases."""
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> Any:
+        check_preset_keywords(cls, kwargs)  # before Python binds the arguments (its TypeError would name one key)
+        return super().__new__(cls)
 
 
 # ---------------------------------------------------------------------------------------------- hyperparameter checks

@@ -9,6 +9,13 @@ observations), :class:`DENFACDictReplayBuffer` (``DictReplayBuffer``, Dict obser
 :class:`~sb3_denfac.denfac.her.DENFACHerReplayBuffer` (``HerReplayBuffer``). Each gives Algorithm 1 its whole content
 with :meth:`BehaviourMeansBuffer.all_samples`; :func:`take` and :func:`n_rows` read rows of its observations, tensors or
 dicts of tensors alike.
+
+Only the importance weights (``weighting="retrace"`` or ``"retrace_next_state_quirk"``) read the behaviour means. So the
+buffers take SB3's ``add``/``extend`` without them (demonstrations, logged data) wherever no importance weight needs
+them, as with DENFAC's default ``weighting="none"``. Such rows hold the mean :data:`UNKNOWN_BEHAVIOUR` (+inf), apart
+from the NaN of uniform warm-up rows (whose density is known); where the weights need the means, ``add`` without them
+is refused, and so is an update that would read such rows (a buffer filled without them, then loaded), naming the
+setting.
 """
 
 from __future__ import annotations
@@ -73,13 +80,24 @@ class DENFACReplayBufferSamples(NamedTuple):
     timeouts: th.Tensor
 
 
+#: The behaviour mean of a row added without one (SB3's ``add``/``extend``): unknown, unlike the NaN of a uniform
+#: warm-up action, whose density is known (module docstring).
+UNKNOWN_BEHAVIOUR = np.inf
+
+
 class BehaviourMeansBuffer:
     """Mixed in before an SB3 buffer: the FIFO replay buffer D of Algorithm 1 with an extra ``behaviour_means`` array.
 
     ``add`` takes the behaviour means either as the keyword ``behaviour_means`` or, when called through SB3's
     ``_store_transition`` (which does not know about them), from :meth:`stage_behaviour_means` called just before.
-    Time-limit truncations are always recorded (``timeouts``); whether they bootstrap is decided by the algorithm.
+    Without either, the row's mean is :data:`UNKNOWN_BEHAVIOUR`, unless :attr:`behaviour_means_needed_by` says that
+    the algorithm's importance weights need it. Time-limit truncations are always recorded (``timeouts``); whether they
+    bootstrap is decided by the algorithm.
     """
+
+    #: the setting whose importance weights read the behaviour means (e.g. ``"weighting='retrace'"``), None where none
+    #: does; the algorithm says which with every transition it stores (:meth:`stage_behaviour_means`)
+    behaviour_means_needed_by: str | None = None
 
     behaviour_means: np.ndarray
     buffer_size: int
@@ -95,9 +113,18 @@ class BehaviourMeansBuffer:
         self.behaviour_means = np.zeros((self.buffer_size, self.n_envs, self.action_dim), dtype=np.float32)
         self._staged_behaviour_means: np.ndarray | None = None
 
-    def stage_behaviour_means(self, behaviour_means: np.ndarray) -> None:
-        """Remember mu_b(s) for the next call to :meth:`add` (shape (n_envs, action_dim))."""
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (``save_replay_buffer``) without :attr:`behaviour_means_needed_by`: the model that loads it says."""
+        state = dict(super().__getstate__())  # type: ignore[misc]
+        state.pop("behaviour_means_needed_by", None)
+        return state
+
+    def stage_behaviour_means(self, behaviour_means: np.ndarray, weighting: str | None = None) -> None:
+        """Remember mu_b(s) for the next call to :meth:`add` (shape (n_envs, action_dim)); ``weighting``, the
+        algorithm's importance weights, says whether they need the means (:attr:`behaviour_means_needed_by`)."""
         self._staged_behaviour_means = np.asarray(behaviour_means, dtype=np.float32)
+        if weighting is not None:
+            self.behaviour_means_needed_by = None if weighting == "none" else f"weighting={weighting!r}"
 
     def add(
         self,
@@ -113,10 +140,13 @@ class BehaviourMeansBuffer:
             behaviour_means = self._staged_behaviour_means
             self._staged_behaviour_means = None
         if behaviour_means is None:
-            raise ValueError(
-                f"{type(self).__name__}.add needs the behaviour means mu_b(s): pass behaviour_means=... "
-                "or call stage_behaviour_means() before add()"
-            )
+            if self.behaviour_means_needed_by is not None:
+                raise ValueError(
+                    f"{type(self).__name__}.add needs the behaviour means mu_b(s) with {self.behaviour_means_needed_by}: "
+                    "its importance weights divide by the density of the policy that played each action. Pass "
+                    "behaviour_means=... (NaN rows: uniformly drawn actions), or use weighting='none'"
+                )
+            behaviour_means = np.full((self.n_envs, self.action_dim), UNKNOWN_BEHAVIOUR, dtype=np.float32)
         self.behaviour_means[self.pos] = np.asarray(behaviour_means, dtype=np.float32).reshape((self.n_envs, self.action_dim))
         super().add(obs, next_obs, action, reward, done, infos)  # type: ignore[misc]
 
@@ -127,11 +157,13 @@ class BehaviourMeansBuffer:
     def _gather(self, batch_inds: np.ndarray, env_indices: np.ndarray, env: VecNormalize | None) -> DENFACReplayBufferSamples:
         """Transitions (``batch_inds``, ``env_indices``) as :class:`DENFACReplayBufferSamples`."""
         timeouts = self.timeouts[batch_inds, env_indices]
+        means = self.behaviour_means[batch_inds, env_indices, :]
+        self._check_means_known(means)
         data = (
             self.actions[batch_inds, env_indices, :],  # type: ignore[attr-defined]
             (self.dones[batch_inds, env_indices] * (1 - timeouts)).reshape(-1, 1),  # type: ignore[attr-defined]
             self._normalize_reward(self.rewards[batch_inds, env_indices].reshape(-1, 1), env),  # type: ignore[attr-defined]
-            self.behaviour_means[batch_inds, env_indices, :],
+            means,
             timeouts.reshape(-1, 1),
         )
         actions, dones, rewards, means, timeouts_ = (self._tensor(x) for x in data)
@@ -139,6 +171,20 @@ class BehaviourMeansBuffer:
             self._observations(which, batch_inds, env_indices, env) for which in ("observations", "next_observations")
         )
         return DENFACReplayBufferSamples(obs, actions, next_obs, dones, rewards, means, timeouts_)
+
+    def _check_means_known(self, means: np.ndarray) -> None:
+        """Refuse rows added without behaviour means where the importance weights need them: they would otherwise
+        be weighted as if played by some policy they were not."""
+        if self.behaviour_means_needed_by is None:
+            return
+        unknown = int(np.isinf(means).any(axis=-1).sum())
+        if unknown:
+            raise ValueError(
+                f"{unknown} transitions of the replay buffer were added without behaviour means (add or extend without "
+                f"behaviour_means=), and {self.behaviour_means_needed_by} needs them: its importance weights divide by "
+                "the density of the policy that played each action. Add them with behaviour_means=..., or use "
+                "weighting='none'"
+            )
 
     def _observations(self, which: str, batch_inds: np.ndarray, env_indices: np.ndarray, env: VecNormalize | None) -> Any:
         stored = getattr(self, which)

@@ -283,7 +283,7 @@ class DENFAC(
     def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
         assert isinstance(replay_buffer, BehaviourMeansBuffer)
         # D stores mu_b(s) clamped to [-1 - 3 sigma, 1 + 3 sigma], as the authors' code (NaN warm-up rows stay NaN)
-        replay_buffer.stage_behaviour_means(clamp_mean(self._last_behaviour_mean, -1.0, 1.0, self.sigma))
+        replay_buffer.stage_behaviour_means(clamp_mean(self._last_behaviour_mean, -1.0, 1.0, self.sigma), self.weighting)
         super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------

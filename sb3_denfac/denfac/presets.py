@@ -16,6 +16,7 @@ start from this preset (``preset: paper``, :mod:`sb3_denfac.zoo.config`).
 from __future__ import annotations
 
 import copy
+from collections.abc import Collection
 from typing import Any
 
 #: Constructor arguments that turn the default DENFAC into the paper's Algorithm 1 (section 4, Figure 5).
@@ -77,3 +78,20 @@ def with_overrides(preset: dict[str, Any], overrides: dict[str, Any]) -> dict[st
 def paper(**overrides: Any) -> dict[str, Any]:
     """:data:`PAPER` with ``overrides`` (:func:`with_overrides`), as constructor arguments."""
     return with_overrides(PAPER, overrides)
+
+
+#: The presets by name (``presets.<NAME>``): constructor arguments of DENFAC.
+PRESETS: dict[str, dict[str, Any]] = {"PAPER": PAPER, "DATA_EFFICIENT": DATA_EFFICIENT}
+
+
+def foreign_preset_message(algorithm: str, keywords: Collection[str], not_taken: Collection[str]) -> str | None:
+    """Why ``algorithm``'s constructor refuses ``not_taken`` (keyword arguments it does not take) when ``keywords``, all
+    those given, hold every key of one of :data:`PRESETS`: that preset is DENFAC's. None when no preset was given."""
+    for name, preset in PRESETS.items():
+        if set(preset) <= set(keywords) and set(not_taken) & set(preset):
+            keys = ", ".join(repr(key) for key in not_taken)
+            return (
+                f"presets.{name} is DENFAC's preset, and {algorithm} does not take {keys}: use "
+                f'DENFAC("MlpPolicy", env, **presets.{name}), or give {algorithm} only arguments it takes'
+            )
+    return None
