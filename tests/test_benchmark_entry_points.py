@@ -248,19 +248,21 @@ def test_runner_names_a_bad_argument_as_a_usage_error(tmp_path, capsys, args, ca
 def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_path, capsys):
     """``--timesteps``: runs end at the step budget, evaluate at the first episode end past every tenth of it and once
     more at the budget, resume as finished cells, and get the mujoco100k report (table, published references, figure)."""
-    args = ["--algos", "denfac_data_efficient", "sac_zoo", "--envs", "Pendulum-v1", "--seeds", "0", "--timesteps", "500"]
+    algos = ["denfac_data_efficient", "sac_zoo", "crossq_zoo"]  # the peers' warm-up outlasts 500 steps: no training
+    args = ["--algos", *algos, "--envs", "Pendulum-v1", "--seeds", "0", "--timesteps", "500"]
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0"]) == 0
     records = store.read_runs(tmp_path)
-    assert len(records) == 2
+    assert len(records) == 3
     for record in records:
         assert record["timesteps"] == 500 and record["timesteps_requested"] == 500 and record["n_episodes"] == 2
         assert [e["timesteps"] for e in record["evaluations"]] == [200, 400, 500]
     text = (tmp_path / "mujoco100k.md").read_text()
     assert "DENFAC (data-efficient preset)" in text and "6156 ± 738 (10 seeds, at 100k)" in text
+    assert "sb3-contrib CrossQ (RL Zoo MuJoCo settings)" in text
     assert (tmp_path / "mujoco100k.png").stat().st_size > 0
     capsys.readouterr()
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
-    assert "0 runs to do, 2 already finished" in capsys.readouterr().out
+    assert "0 runs to do, 3 already finished" in capsys.readouterr().out
 
 
 def test_step_budget_suite_refuses_an_episode_budget(tmp_path):
