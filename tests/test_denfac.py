@@ -148,6 +148,7 @@ def test_save_load_exact(make_denfac, tmp_path):
     model.save(tmp_path / "denfac.zip")
     model.save_replay_buffer(tmp_path / "buffer.pkl")
     loaded = DENFAC.load(tmp_path / "denfac.zip", env=env)
+    # exact: the same bits saved and read back, evaluated by the same kernels in one process
     np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], actions)
     for name, value in model.policy.state_dict().items():  # includes BN running statistics
         assert th.equal(value, loaded.policy.state_dict()[name]), name
@@ -250,13 +251,15 @@ def test_one_transition_buffer_waits_for_the_next_episode(make_denfac, update_pa
 
 def test_model_saved_by_version_0_1_loads_with_its_own_defaults():
     """sb3-denfac 0.1 saved no net_arch/batch_norm/init when they were defaults: it loads with the paper's
-    networks it was built with (not 0.2's defaults) and predicts exactly as when it was saved."""
+    networks it was built with (not 0.2's defaults) and predicts as when it was saved (to float32 rounding)."""
     data = Path(__file__).parent / "data"
     model = DENFAC.load(data / "denfac_v0.1_pendulum.zip", device="cpu")
     assert model.policy.net_arch == {"pi": [20], "qf": [50, 7]} and model.policy.actor.batch_norm
     assert model.weighting == "retrace" and model.reset_actor and model.batch_size is None
     assert model.actor_proximal == 0.0  # no proximal actor then (the 0.3 default is 1.0)
     obs = np.load(data / "denfac_v0.1_pendulum_obs.npy")
-    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], np.load(data / "denfac_v0.1_pendulum_actions.npy"))
+    # rtol 1e-5: one forward pass (BN, two layers) on another CPU's float32 kernels differs by an ulp (1e-7, measured)
+    actions = np.load(data / "denfac_v0.1_pendulum_actions.npy")
+    np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], actions, rtol=1e-5, atol=1e-6)
     model.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
     model.learn(50, reset_num_timesteps=False)  # and trains on

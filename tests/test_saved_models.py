@@ -26,6 +26,7 @@ def test_v0_2_model_loads_predicts_and_trains(name: str) -> None:
     model = ALGOS[name].load(DATA / f"{name}_v0.2_pendulum.zip", device="cpu")
     assert sorted(model.policy.state_dict().keys()) == EXPECTED[name]["keys"]
     obs = np.asarray(EXPECTED["obs"], dtype=np.float32)
+    # rtol 1e-5: one forward pass on another CPU's float32 kernels than the fixture's (an ulp or so), not a trained value
     np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], np.asarray(EXPECTED[name]["actions"]), rtol=1e-5)
     model.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
     model.learn(100, reset_num_timesteps=False)
@@ -48,7 +49,7 @@ def test_v0_2_optimizer_state_and_rates_are_restored(name: str) -> None:
         saved_state = next(saved[key] for key in (f"{net}.optimizer", f"policy.{net}_optimizer") if key in saved)
         state = getattr(model.policy, net).optimizer.state_dict()
         assert [float(s["step"]) for s in state["state"].values()] == [float(s["step"]) for s in saved_state["state"].values()]
-        for index, moments in saved_state["state"].items():
+        for index, moments in saved_state["state"].items():  # float32 defaults (1.3e-6): stored moments, read back
             th.testing.assert_close(state["state"][index]["exp_avg"], moments["exp_avg"])
         assert getattr(model, f"{net}_lr_schedule")(0.5) == pytest.approx(rate)
     assert any(saved[key]["state"] for key in saved if key != "policy"), "the fixture has no Adam state to compare"
@@ -87,4 +88,5 @@ def test_policy_defaults_are_saved_and_missing_keys_mean_an_older_file(tmp_path)
     loaded = DENFAC.load(tmp_path / "old.zip", device="cpu")  # the paper's networks, or the state dict would not fit
     assert {k: loaded.policy_kwargs[k] for k in paper_nets} == paper_nets
     obs = np.asarray(EXPECTED["obs"], dtype=np.float32)
+    # exact: the same parameters, saved and read back, through the same kernels in one process
     np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], old.predict(obs, deterministic=True)[0])

@@ -126,6 +126,7 @@ def test_soft_targets_subtract_alpha_log_pi(soft_model):
     with th.no_grad():
         q_bar = combine_critics(model.critic.all_q(data.next_observations, actions), "mean")
     expected = data.rewards + 0.9 * (1 - data.dones) * (q_bar - 0.3 * log_prob)
+    # rtol/atol 1e-5: the update's soft targets recomputed from the same draws by the modules (a few ulps)
     th.testing.assert_close(model.last_update.q_targets, expected, rtol=1e-5, atol=1e-5)
     assert log_prob.shape == (data.rewards.shape[0], 1) and log_prob.std() > 0
 
@@ -148,14 +149,14 @@ def test_fast_updater_fits_the_critic_only(soft_model):
 
 def test_fast_and_plain_updaters_agree(soft_model):
     """Fast critic steps, the actor and alpha on autograd in both, on the same draws: the same losses, parameters and
-    Adam moments (as DENFAC's test_fast_and_plain_paths_agree)."""
-    from tests.test_denfac_updaters import assert_same_update
+    Adam moments after an update from the same state (as DENFAC's test_fast_and_plain_paths_agree)."""
+    from tests.test_denfac_updaters import assert_one_update_agrees
 
     kwargs = dict(gamma=0.99, batch_size=32, learning_rate=0.01, policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4])))
-    plain, fast = (soft_model(update_path=path, **kwargs).learn(100) for path in ("plain", "fast"))
-    assert isinstance(fast.make_updater(), FastUpdater)
-    assert_same_update(plain, fast)
-    assert plain.policy.log_ent_coef.item() == pytest.approx(fast.policy.log_ent_coef.item(), rel=1e-5)
+    assert isinstance(soft_model(update_path="fast", **kwargs).make_updater(), FastUpdater)
+    for plain, fast in assert_one_update_agrees(lambda path: soft_model(update_path=path, **kwargs), 10, trained=5):
+        # rel 1e-5: one scalar, moved by one update's alpha steps on both paths' log-probabilities (measured <= 1e-7)
+        assert plain.policy.log_ent_coef.item() == pytest.approx(fast.policy.log_ent_coef.item(), rel=1e-5)
 
 
 def test_a_fixed_alpha_is_the_models_ent_coef_after_a_load(tmp_path, soft_model, target_action_env):
@@ -172,6 +173,7 @@ def test_save_load_is_exact(tmp_path, soft_model, target_action_env):
     model.save(tmp_path / "model.zip")
     loaded = SoftDENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert isinstance(loaded.actor, SACActor) and (loaded.ent_coef, loaded.target_entropy) == ("auto_0.5", -0.5)
+    # float32 defaults and ==: the same bits saved and read back, and the same update from them in one process
     assert loaded.policy.log_ent_coef.item() == model.policy.log_ent_coef.item() != np.log(0.5)
     before = model.policy.ent_coef_optimizer.state_dict()["state"][0]
     after = loaded.policy.ent_coef_optimizer.state_dict()["state"][0]
@@ -194,20 +196,31 @@ def test_save_load_is_exact(tmp_path, soft_model, target_action_env):
 def test_files_of_the_soft_actor_option_load_and_train_as_before(target_action_env):
     """``tests/data/denfac_soft_v0.5dev_pendulum.zip`` was saved by ``DENFAC(..., ent_coef="auto_0.5")`` of the 0.5
     development builds (``tests/data/make_v0.5dev_soft_fixture.py``). SoftDENFAC loads it with its networks, alpha and
-    settings; DENFAC refuses it, naming SoftDENFAC; and SoftDENFAC, built with the same arguments, trains exactly as that
-    build did (the same alpha and actions after the same run)."""
+    settings; DENFAC refuses it, naming SoftDENFAC; and SoftDENFAC computes that build's update: one more episode and
+    update of the loaded model, and the first episode and update of one built with the same arguments, give that build's
+    alpha and actions (after one update: after 200 steps, other CPUs' kernels gave log alpha 2e-4 and actions 20% away)."""
     expected = json.loads((DATA / "soft_v0.5dev_pendulum_expected.json").read_text())
     obs = np.asarray(expected["obs"], dtype=np.float32)
     loaded = SoftDENFAC.load(DATA / "denfac_soft_v0.5dev_pendulum.zip", device="cpu")
     assert sorted(loaded.policy.state_dict()) == expected["keys"]
     assert (loaded.ent_coef, loaded.target_entropy, loaded.bootstrap_bounds) == ("auto_0.5", -0.5, True)
-    assert loaded.policy.log_ent_coef.item() == expected["log_ent_coef"]
-    np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], expected["actions"], rtol=1e-6)
-    loaded.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
-    loaded.learn(100, reset_num_timesteps=False)
-    assert loaded.policy.log_ent_coef.item() != expected["log_ent_coef"]
+    assert loaded.policy.log_ent_coef.item() == expected["log_ent_coef"]  # exact: a stored float32, read back
+    # one forward pass: float32 rounding of another CPU's kernels (measured 0 to 1 ulp), far below a wrong network
+    np.testing.assert_allclose(loaded.predict(obs, deterministic=True)[0], expected["actions"], rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="load it with SoftDENFAC.load"):
         DENFAC.load(DATA / "denfac_soft_v0.5dev_pendulum.zip")
+
+    def assert_as_that_build(model: SoftDENFAC, key: str) -> None:
+        # rtol 1e-4: one update (a 50-step episode, then 10 x (5 critic + 25 actor) Adam steps) under other kernels
+        # moved them 4e-6 (ATEN_CPU_CAPABILITY=default); an actor step fewer, gamma 0.989 for 0.99 moved actions >2e-3
+        assert model.policy.log_ent_coef.item() == pytest.approx(expected[key]["log_ent_coef"], rel=1e-4, abs=1e-5)
+        np.testing.assert_allclose(model.predict(obs, deterministic=True)[0], expected[key]["actions"], rtol=1e-4, atol=1e-5)
+
+    loaded.set_env(gym.make("Pendulum-v1", max_episode_steps=50))
+    loaded.set_random_seed(1)
+    loaded.learn(50, reset_num_timesteps=False)
+    assert loaded._n_updates == 5  # the file's 4 and this one
+    assert_as_that_build(loaded, "update_after_load")
     rebuilt = SoftDENFAC(
         "MlpPolicy",
         gym.make("Pendulum-v1", max_episode_steps=50),
@@ -215,9 +228,8 @@ def test_files_of_the_soft_actor_option_load_and_train_as_before(target_action_e
         target_entropy=-0.5,
         critic_steps=5,
         seed=0,
-    ).learn(200)
-    assert rebuilt.policy.log_ent_coef.item() == expected["log_ent_coef"]
-    np.testing.assert_allclose(rebuilt.predict(obs, deterministic=True)[0], expected["actions"], rtol=1e-6)
+    ).learn(50)
+    assert_as_that_build(rebuilt, "first_update")
 
 
 def test_soft_denfac_learns_target_action(target_action_env):
