@@ -167,6 +167,7 @@ def batch_norm_buffers(module: th.nn.Module) -> dict[str, th.Tensor]:
     }
 
 
+# exact: for runs repeated in one process (same seed, code and kernels) and for values saved and read back
 def assert_equal_nested(a: Any, b: Any, where: str = "") -> None:
     """Exact equality of nested dicts / lists of tensors and scalars (optimizer state dicts included)."""
     if isinstance(a, th.Tensor):

@@ -23,6 +23,7 @@ def test_floor_counts_the_fast_updates_matrix_products(acrobot_model):
     with FlopCounterMode(display=False) as counter:
         acrobot_model._update()
     counted = update_cost.matmul_flops(update_cost.update_matmuls(acrobot_model))
+    # rel 0.06: FLOP counts, not float results: the rank-1 products the fast updater broadcasts are not in the floor
     assert counter.get_total_flops() == pytest.approx(counted, rel=0.06)
 
 

@@ -70,6 +70,7 @@ def test_callback_records_paper_performance_and_stops(lower_is_better):
     expected = [ScriptedEpisodesEnv.expected(k) for k in range(1, 8)]
     assert callback.n_episodes == 7  # stopped by the episode budget, far below the step budget
     assert model.num_timesteps == sum(length for length, _ in expected)
+    # rtol 1e-7: the scripted episodes' rewards summed in float64 (no network involved)
     np.testing.assert_allclose(callback.performances(), [p for _, p in expected])
     running = np.minimum.accumulate if lower_is_better else np.maximum.accumulate
     np.testing.assert_allclose([r["best_so_far"] for r in callback.records], running([p for _, p in expected]))
@@ -356,6 +357,7 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     for record in records.values():  # CartPole's paper measure is the episode return
         eps = record["episodes"]
         assert len(eps["episode"]) == 3 and all(c > 0 for c in eps["cpu_time"])
+        # atol 1e-3: the same return, stored rounded to 3 decimals
         np.testing.assert_allclose(eps["performance"], eps["return"], atol=1e-3)
     meta = records[("td3", 1)]
     assert meta["n_episodes"] == 3 and meta["cpu_time"] > 0 and meta["hyperparams_source"].startswith("td3.yml[default]")
@@ -463,6 +465,7 @@ def test_cost_extrapolation_recovers_the_cost_models():
         {"episode": np.arange(1, 15), "cpu_time": np.cumsum(per_episode_cpu), "timesteps": steps, "length": lengths}
     )
     row = cost.extrapolate(episodes, "denfac", "acrobot", 100, {"buffer_size": "6000"})
+    # rel 1e-6: a float64 least-squares fit of exactly linear data recovers its coefficients to rounding
     assert (row["per_step"], row["per_d"], row["per_episode"]) == pytest.approx((1e-3, 2e-5, 0.05), rel=1e-6)
     full = np.minimum(6000, np.arange(100) * 500).sum()
     assert row["estimate"] == pytest.approx(1e-3 * 100 * 500 + 2e-5 * full + 0.05 * 100, rel=1e-6)
@@ -483,6 +486,7 @@ def test_missing_cells_cost_the_seeds_left_from_measured_runs():
     assert row["pendulum"] == "2/3, 1.50 h"  # one seed left at the median of the measured runs
     planned = 3 * suites.estimated_cost("sac", "cartpole") / 3600
     assert row["cartpole"] == f"0/3, <={planned:.2f} h"  # no run yet: the plan's upper bound
+    # abs 0.01: the table prints hours with 2 decimals
     assert float(row["CPU hours left"]) == pytest.approx(1.5 + planned, abs=0.01)
     unplanned = suites.Suite("u", ("pendulum", "no-such-env"), ((("sac",), (0, 1, 2)),), "test")
     row = tables.missing_cells(unplanned, runs).iloc[0]

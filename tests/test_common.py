@@ -35,6 +35,7 @@ def test_log_prob_matches_scipy_truncnorm(mean, sigma, action):
         th.tensor([[action]], dtype=th.float64), th.tensor([[mean]], dtype=th.float64), sigma, th.tensor(-1.0), th.tensor(1.0)
     )
     assert got.shape == (1,)
+    # rel 1e-6: float64 against scipy's float64 formula (different but accurate evaluations of erf and logs)
     assert got.item() == pytest.approx(ref, rel=1e-6, abs=1e-6)
 
 
@@ -44,6 +45,7 @@ def test_log_prob_sums_over_action_dims():
     low, high = th.tensor([-1.0, -1.0]), th.tensor([1.0, 1.0])
     joint = truncated_normal_log_prob(actions, mean, 0.3, low, high)
     per_dim = [truncated_normal_log_prob(actions[:, j : j + 1], mean[:, j : j + 1], 0.3, low[:1], high[:1]) for j in range(2)]
+    # float32 defaults (rtol 1.3e-6, atol 1e-5): a sum of the same terms in another order
     th.testing.assert_close(joint, per_dim[0] + per_dim[1])
 
 
@@ -115,6 +117,7 @@ def test_inverting_gradients_scale_as_hausknecht_and_stone():
     actions = th.tensor([0.5, -0.5, 0.5, -0.5])
     out = invert_gradients(grad, actions, th.tensor(-1.0), th.tensor(1.0))
     # increase: scaled by (a_max - a)/span; decrease: scaled by (a - a_min)/span
+    # float32 defaults: the hand-computed values, exact in binary up to a rounding of the scaling
     th.testing.assert_close(out, th.tensor([2 * 0.25, 2 * 0.75, -2 * 0.75, -2 * 0.25]))
 
 
@@ -123,6 +126,7 @@ def test_inverting_gradients_scale_as_hausknecht_and_stone():
 def test_inverting_gradients_unit_box_equals_general_rule(grad, action):
     general = invert_gradients(th.tensor([grad]), th.tensor([action]), th.tensor(-1.0), th.tensor(1.0))
     unit = invert_gradients_unit_box(th.tensor([grad]), th.tensor([action]))
+    # rtol 1e-6: the same formula with the bounds folded in (a float32 ulp or two)
     th.testing.assert_close(unit, general, rtol=1e-6, atol=0.0)
 
 

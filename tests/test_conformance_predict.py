@@ -33,6 +33,7 @@ def test_deterministic_training(
 
     initial, params, actions = run(seed=3)
     _, params_again, actions_again = run(seed=3)
+    # exact: the same seed, code and kernels in one process repeat a run bit for bit (SB3's test_deterministic)
     assert_same_parameters(params, params_again)
     np.testing.assert_array_equal(actions, actions_again)
 
@@ -70,6 +71,7 @@ def test_predict_shapes_and_wrapping(name: str, episode_steps, make_env, make_mo
     vec_env.step(actions)
 
     single, _ = model.predict(vec_obs[0], deterministic=True)
+    # rtol/atol 1e-6: a batch of one may take another matmul kernel than a batch of three (an ulp); the rest exact
     np.testing.assert_allclose(single, actions[0], rtol=1e-6, atol=1e-6)  # batch-norm eval mode: no batch effect
     again, _ = model.predict(vec_obs, deterministic=True)
     np.testing.assert_array_equal(actions, again)
@@ -109,6 +111,7 @@ def test_batch_norm_train_eval_mode(
         model.predict(observations[0], deterministic=deterministic)  # a batch of 1 works in eval mode
     after_predict = batch_norm_buffers(model.policy)
     for key, value in before.items():
+        # exact: predict() must not write the statistics at all
         assert th.equal(value, after_predict[key]), f"predict() changed the running statistics {key}"
 
     model.learn(2 * episode_steps, reset_num_timesteps=False)

@@ -67,6 +67,7 @@ def test_ddpg_target_networks_copy_batch_norm_statistics(episode_steps, batch_no
         online_stats, target_stats = batch_norm_buffers(online), batch_norm_buffers(target)
         assert online_stats
         for key, value in online_stats.items():
+            # exact: the statistics are copied, not averaged
             assert th.equal(value, target_stats[key]), key
         online_weights = th.cat([p.flatten() for p in online.parameters()])
         target_weights = th.cat([p.flatten() for p in target.parameters()])
@@ -117,6 +118,7 @@ def test_learn_stops_inside_a_never_ending_episode(
     model.learn(16, reset_num_timesteps=False)
     assert start + 16 <= model.num_timesteps < start + 16 + n_steps
     if name in off_policy_names:  # the buffer continues the episode from the stored last observation
+        # exact: the stored observation, copied
         np.testing.assert_array_equal(model.replay_buffer.observations[start % model.buffer_size], last_obs)
     assert model.ep_info_buffer is None or len(model.ep_info_buffer) == 0  # no episode was ended
 
@@ -130,5 +132,6 @@ def test_cmaes_resumes_an_evaluation_cut_by_the_budget(episode_steps, assert_sam
         split.learn(budget, reset_num_timesteps=False)
     assert split.num_timesteps == whole.num_timesteps and split.generation == whole.generation == 3
     assert split.best_return == whole.best_return
+    # exact: the same seed, code and kernels in one process repeat a run bit for bit, whatever the budgets' cuts
     np.testing.assert_array_equal(split.es.mean, whole.es.mean)
     assert_same_parameters(split.get_parameters(), whole.get_parameters())

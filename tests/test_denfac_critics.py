@@ -39,6 +39,7 @@ def test_target_q_is_the_minimum_and_forward_is_q1(twin_model):
         values = th.cat(critic.all_q(obs, actions), dim=1)
         critic.twin_qfs[0][-1].bias += (values[:, 0] - values[:, 1]).median()  # Q_2 below Q_1 on about half the inputs
         values = th.cat(critic.all_q(obs, actions), dim=1)
+        # float32 defaults (rtol 1.3e-6, atol 1e-5): the same forward passes, another call
         th.testing.assert_close(critic.target_q(obs, actions, "min"), values.min(dim=1, keepdim=True).values)
         th.testing.assert_close(critic(obs, actions), values[:, :1])
     assert (values.argmin(dim=1) == 0).any() and (values.argmin(dim=1) != 0).any()  # the minimum is not always Q_1
@@ -56,6 +57,7 @@ def test_update_targets_take_the_minimum_over_the_critics(twin_model):
         q_next = th.cat(before.critic.all_q(data.next_observations, next_actions), dim=1)
     bootstrap = 0.9 * (1.0 - data.dones)
     expected = data.rewards + bootstrap * q_next.min(dim=1, keepdim=True).values
+    # float32 defaults (rtol 1.3e-6, atol 1e-5): the update's targets recomputed by autograd modules, values of order 1
     th.testing.assert_close(model.last_update.q_targets, expected)
     assert (expected < data.rewards + bootstrap * q_next[:, :1] - 1e-6).any()  # Q_1 alone would give other targets
 
@@ -86,6 +88,7 @@ def test_the_fast_updater_has_every_critic(twin_model):
     obs = model.replay_buffer.all_samples().observations
     actions = updater.actor(obs)
     with th.no_grad():
+        # float32 defaults: the fast updater's folded eval-mode networks against the modules (a few ulps)
         th.testing.assert_close(updater.critic(obs, actions), model.critic.target_q(obs, actions, model.critic_target))
     updater.fit_critic(obs, actions, th.zeros(len(obs), 1), th.ones(len(obs), 1))
     updater.finish()  # every Q network's Adam state is written back into the one critic optimizer
@@ -106,6 +109,7 @@ def test_save_load_keeps_every_critic(tmp_path, twin_model, target_action_env):
     obs, actions = th.rand(20, 2) * 2 - 1, th.rand(20, 1) * 2 - 1
     with th.no_grad():
         for q, q_loaded in zip(model.critic.all_q(obs, actions), loaded.critic.all_q(obs, actions), strict=True):
+            # float32 defaults; the same parameters read back: equal in practice
             th.testing.assert_close(q, q_loaded)
     loaded.learn(20, reset_num_timesteps=False)
     assert loaded._n_updates == model._n_updates + 2

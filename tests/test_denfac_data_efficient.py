@@ -54,6 +54,7 @@ def test_critic_reset_reinitialises_the_layer_norms(target_action_env):
     ln = _layer_norms(model.critic)[0]
     assert not th.equal(ln.weight, th.ones_like(ln.weight))  # fitted since the last reset
     model.policy.reset_critic()
+    # exact: a reset writes the initial constants
     assert th.equal(ln.weight, th.ones_like(ln.weight)) and th.equal(ln.bias, th.zeros_like(ln.bias))
 
 
@@ -64,6 +65,7 @@ def test_save_load_keeps_the_layer_norm(tmp_path, target_action_env):
     loaded = DENFAC.load(tmp_path / "model.zip", env=target_action_env())
     assert loaded.policy.layer_norm and len(_layer_norms(loaded.critic)) == 4
     obs = np.stack([target_action_env().observation_space.sample() for _ in range(8)])
+    # exact: the same bits saved and read back, evaluated by the same kernels in one process
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
 
 

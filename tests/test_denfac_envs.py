@@ -67,6 +67,7 @@ def test_subprocess_envs_train_save_and_load(tmp_path) -> None:
         model.save(tmp_path / "model.zip")
         loaded = DENFAC.load(tmp_path / "model.zip", env=env)
         obs = env.reset()
+        # exact: the same bits saved and read back, evaluated by the same kernels in one process
         np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
         loaded.learn(40, reset_num_timesteps=False)  # goes on from the file with the same envs
         assert loaded._n_updates == 6
@@ -90,6 +91,7 @@ def test_async_update_plays_the_last_published_policy_and_leaves_no_thread() -> 
     assert model.policy is not first and id(first) in played  # each update's copy became the model's policy
     assert len(played) >= 2  # (fits slower than an episode are published at the next episode end, then played)
     for _, *parameters in played.values():  # a policy that plays is never written: the learner fits a copy
+        # exact: a published policy must never be written
         assert all(th.equal(parameters[0], p) for p in parameters[1:])
     assert not _learner_threads()
     assert model.async_update is True

@@ -38,6 +38,7 @@ def test_priorities_follow_the_td_errors():
     td[7] = -100.0  # sign does not matter: |delta|
     sampler = PrioritisedSampler(td, alpha=0.6, beta=0.4, eps=1e-3, batch_size=256)
     p = (td.abs().flatten() + 1e-3) ** 0.6
+    # float32 defaults (rtol 1.3e-6): the same formula evaluated here; draw counts below: a sampling tolerance (rel 0.2)
     th.testing.assert_close(sampler.probabilities, p / p.sum())
     counts = th.zeros(1000)
     for _ in range(40):
@@ -57,6 +58,7 @@ def test_importance_weights_are_in_0_1_with_max_1():
     sampler = PrioritisedSampler(td, alpha=0.6, beta=beta, eps=1e-3, batch_size=64)
     n, probs = 500, sampler.probabilities
     raw = (n * probs) ** -beta
+    # float32 defaults (rtol 1.3e-6): the same formulas evaluated here
     th.testing.assert_close(sampler.weights.flatten(), raw / raw.max())
     assert sampler.weights.max() == pytest.approx(1.0) and sampler.weights.min() > 0
     assert int(sampler.weights.argmax()) == int(probs.argmin())  # the least likely transition has weight 1
@@ -109,6 +111,7 @@ def test_prioritised_critic_loss_uses_the_weights(monkeypatch, small_model):
     with th.no_grad():
         expected = (w * (critic(obs[idx], actions[idx]) - q[idx]).pow(2)).mean()
     loss = updater.fit_critic(obs, actions, q, th.ones_like(q))
+    # float32 defaults: the same weighted loss, recomputed on a copy of the critic
     th.testing.assert_close(loss, expected)
 
 
@@ -123,6 +126,7 @@ def test_proximal_loss_gradient():
     proximal_actor_backward(q, pi, pi_old, coef=0.7, inverting_gradients=False)
     scale = g.norm(dim=1).mean()
     expected = -g / scale / 5 + 2 * 0.7 * (pi.detach() - pi_old) / 5
+    # float32 defaults (rtol 1.3e-6, atol 1e-5): autograd against the gradient by hand, values of order 1
     th.testing.assert_close(pi.grad, expected)
     # inverting gradients: g inverted first (Hausknecht & Stone), then normalised
     from sb3_denfac.common.inverting_gradients import invert_gradients
@@ -160,6 +164,7 @@ def test_huge_proximal_coefficient_keeps_the_actor(small_model):
         model.actor.mu[-1].bias.add_(1.0)  # moving the actor does not move pi_old
         fast.policy.actor.mu[-1].bias.add_(1.0)
     assert (updater.old_actor(obs) - model.actor(obs)).abs().max() > 0.9
+    # float32 defaults: the same frozen affines evaluated twice (exact in practice): pi_old did not move
     th.testing.assert_close(fast.actor_net.eval_forward(obs.t(), fast.old_actor_affines).t(), old_fast)
     assert (fast.actor(obs) - old_fast).abs().max() > 0.9
 

@@ -28,6 +28,7 @@ def _expected_targets(before, data, gamma, combine):
 
 def test_combine_critics():
     values = [th.tensor([[1.0], [4.0]]), th.tensor([[3.0], [2.0]])]
+    # float32 defaults: small integers, exact in binary
     th.testing.assert_close(combine_critics(values, "min"), th.tensor([[1.0], [2.0]]))
     th.testing.assert_close(combine_critics(values, "mean"), th.tensor([[2.0], [3.0]]))
     assert combine_critics(values[:1], "mean") is values[0]
@@ -42,6 +43,7 @@ def test_mean_critic_target(target_action_env, update_path):
     model._update()
     data = model.replay_buffer.all_samples()
     expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
+    # rtol 1e-4, atol 1e-5: the update's targets (either updater) against autograd modules in eval mode (a few ulps)
     th.testing.assert_close(model.last_update.q_targets, expected, rtol=1e-4, atol=1e-5)
     minimum = _expected_targets(before, data, 0.9, lambda v: v.min(dim=1, keepdim=True).values)
     assert (expected > minimum + 1e-6).any()  # the default's minimum would give other targets
@@ -55,6 +57,7 @@ def test_updaters_agree_on_the_mean(target_action_env):
     assert settings.critic_target == "mean"
     fast, plain = (make_updater(model.policy, settings, path).updater for path in ("fast", "plain"))
     with th.no_grad():
+        # rtol 1e-4, atol 1e-5: the fast updater's folded networks against the modules; the plain one is the modules
         th.testing.assert_close(fast.critic(obs, actions), plain.critic(obs, actions), rtol=1e-4, atol=1e-5)
         th.testing.assert_close(plain.critic(obs, actions), model.critic.target_q(obs, actions, "mean"))
 
@@ -82,6 +85,7 @@ def test_defaults_and_no_target_noise_is_the_deterministic_next_action(target_ac
     updater = model.make_updater()
     next_obs = model.replay_buffer.all_samples().next_observations
     with th.no_grad():
+        # float32 defaults: the same forward pass twice (exact in practice): no noise is added
         th.testing.assert_close(model._target_actions(updater, next_obs), updater.actor(next_obs).clamp(-1.0, 1.0))
 
 
@@ -130,6 +134,7 @@ def test_targets_on_the_mini_batches_rows_are_those_of_all_of_d(target_action_en
     data = model.replay_buffer.all_samples()
     assert rows is not None and len(rows) == 5 * 8  # 5 critic steps x 8 draws out of the 40 transitions
     expected = _expected_targets(before, data, 0.9, lambda v: v.mean(dim=1, keepdim=True))
+    # rtol 1e-4, atol 1e-5: the update's targets (either updater) against autograd modules in eval mode (a few ulps)
     th.testing.assert_close(model.last_update.q_targets, expected[rows], rtol=1e-4, atol=1e-5)
 
 
@@ -209,6 +214,7 @@ def test_bootstrap_bounds_change_nothing_inside_the_range(target_action_env):
         model._update()
         targets.append(model.last_update.q_targets)
     assert model.logger.name_to_value["train/bootstrap_clip_fraction"] == 0.0
+    # float32 defaults: the same update from the same state and draws, with and without a clamp that cuts nothing
     th.testing.assert_close(targets[0], targets[1])
 
 

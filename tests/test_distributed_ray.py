@@ -250,6 +250,7 @@ def test_sweep_on_ray_matches_the_local_sweep(ray_cluster: RayCluster, local_swe
     assert "finished: 2 done, 0 skipped, 0 failed" in text
     records = _records(results)
     assert [r["status"] for r in records] == ["done", "done"]
+    # exact: the same seed, code and kernels (one machine, one thread per process) repeat a run bit for bit
     assert _columns(records) == {cell: local_sweep[cell] for cell in [("cmaes", "pendulum", s) for s in SEEDS[:2]]}
 
 
@@ -295,4 +296,5 @@ def test_sweep_survives_a_lost_worker_node_and_a_lost_driver(
     assert records[: len(after_kills)] == after_kills  # nothing finished was lost or rewritten
     assert [r["status"] for r in records] == ["done"] * len(SEEDS)
     assert sorted((r["algo"], r["env"], r["seed"]) for r in records) == sorted(cells)  # each cell once
+    # exact: the same seed, code and kernels (one machine, one thread per process) repeat a run bit for bit
     assert _columns(records) == local_sweep

@@ -80,6 +80,7 @@ def test_cartpole_fail_penalty_depends_on_failing_step() -> None:
     assert 1 < t < 500
     assert rewards[-1] == -2 * (500 - t)  # last_step = 1-based index of the failing step
     assert set(rewards[:-1]) <= {0.0, -1.0}
+    # approx (rel 1e-6): a float64 sum of the same rewards in another order
     assert info["paper_performance"] == pytest.approx(sum(rewards))
 
 
@@ -123,6 +124,7 @@ def test_cartpole_actions_clipped_and_random_start() -> None:
         env.reset(seed=0)
     envs[0].step(np.array([1.0], dtype=np.float32))
     envs[1].step(np.array([7.0], dtype=np.float32))
+    # rtol 1e-7: float64 dynamics from the same state and the same clipped force (equal in practice)
     np.testing.assert_allclose(envs[0].state, envs[1].state)
     # Force = a * 10 N: from rest, one Euler step gives x_dot = tau * F / M * (1 + m_p l / (M l (4/3 - m_p / M))).
     expected_x_dot = 0.02 * 10.0 / 1.1 * (1 + 0.05 / (1.1 * 0.5 * (4 / 3 - 0.1 / 1.1)))
@@ -179,6 +181,7 @@ def test_acrobot_timeout_reward_is_running_max_height() -> None:
     assert truncated and not terminated and len(rewards) == 60
     assert all(r == 0.0 for r in rewards[:-1])
     assert 0 < max(heights) < 0.99
+    # approx (rel 1e-6): the env's float64 running maximum against heights read from its state
     assert rewards[-1] == pytest.approx(max(heights))
     assert info["paper_performance"] == 60
 
@@ -191,6 +194,7 @@ def test_acrobot_timeout_from_inner_time_limit_and_gym_make() -> None:
     for _ in range(6):
         assert env.step(push)[1] == 0.0
     _, reward, _, truncated, info = env.step(push)
+    # approx (rel 1e-6): the same float64 height, returned and stored
     assert truncated and reward == pytest.approx(env.max_height) and reward > 0
     assert info["paper_performance"] == 7
     # ... and on the 500th step of the registered id (own counter and gymnasium's TimeLimit agree).
@@ -247,6 +251,7 @@ def test_acrobot_options() -> None:
         env.reset(seed=0)
     strong.step(np.array([1.0], dtype=np.float32))
     clipped.step(np.array([5.0], dtype=np.float32))
+    # rtol 1e-7: float64 dynamics from the same state and the same clipped torque (equal in practice)
     np.testing.assert_allclose(strong.state, clipped.state)
     with pytest.raises(ValueError, match="obs_type"):
         ContinuousAcrobotEnv(obs_type="pixels")
@@ -280,6 +285,7 @@ def test_cheetah_no_penalty_in_normal_stance(cheetah) -> None:
     for _ in range(10):
         _, reward, terminated, _, info = cheetah.step(zero_action(cheetah))
         assert not info["floor_contact"] and not terminated
+        # approx (rel 1e-6): the reward's float64 terms, recomputed from the info the env reports
         assert reward == pytest.approx(info["x_velocity"])
     action = np.full(6, 0.5, dtype=np.float32)
     _, reward, _, _, info = cheetah.step(action)
@@ -293,6 +299,7 @@ def test_cheetah_head_contact_penalty_every_substep(cheetah) -> None:
     put_head_on_floor(cheetah.base_env, vertical_speed=5.0)
     _, reward, terminated, _, info = cheetah.step(zero_action(cheetah))
     assert info["head_contact"] and info["floor_contact"] and "head" in info["floor_contact_geoms"]
+    # approx (rel 1e-6): the reward's float64 terms, recomputed from the info the env reports
     assert reward == pytest.approx(info["x_velocity"] - 1.0) and not terminated
     # Thrown upwards, the head has left the floor by the last sub-step: only sub-step recording sees the contact.
     base = cheetah.base_env
@@ -319,6 +326,7 @@ def test_cheetah_paper_performance_is_return(cheetah) -> None:
         _, reward, terminated, truncated, info = cheetah.step(rng.uniform(-1, 1, 6).astype(np.float32))
         total += reward
         assert truncated == (t == 20) and not terminated
+    # approx (rel 1e-6): a float64 sum of the same rewards in another order
     assert info["paper_performance"] == pytest.approx(total)
 
 
@@ -330,5 +338,6 @@ def test_cheetah_wrapper_on_plain_half_cheetah_v5() -> None:
     put_head_on_floor(env.unwrapped)
     _, reward, _, _, info = env.step(zero_action(env))
     assert "floor_contact" in info  # last sub-step only on a plain v5 env
+    # approx (rel 1e-6): the reward's float64 terms, recomputed from the info the env reports
     assert reward == pytest.approx(info["x_velocity"] - float(info["floor_contact"]))
     env.close()

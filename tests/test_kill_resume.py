@@ -93,6 +93,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path: Path) -> None:
     assert model.num_timesteps == step and model._n_updates == int(saved["n_updates"]) > 0
     assert model._episode_num == int(saved["episode_num"])
     assert buffer.pos == int(saved["pos"]) and buffer.full == bool(saved["full"])
+    # exact: stored arrays, saved and read back
     for name in ("observations", "actions", "rewards", "behaviour_means"):
         np.testing.assert_array_equal(getattr(buffer, name), saved[name], err_msg=name)
     assert np.isfinite(buffer.behaviour_means[: buffer.pos]).all() and np.abs(buffer.behaviour_means[: buffer.pos]).sum() > 0

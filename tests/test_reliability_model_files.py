@@ -149,6 +149,7 @@ def test_save_and_resume_loses_nothing(
     if off_policy:
         assert resumed.replay_buffer.size() == uninterrupted.replay_buffer.size() == total
         for key in ("observations", "actions", "rewards", "dones"):
+            # exact: the same seed, code and kernels in one process repeat a run bit for bit
             np.testing.assert_array_equal(
                 getattr(resumed.replay_buffer, key)[:half], getattr(uninterrupted.replay_buffer, key)[:half], err_msg=key
             )
@@ -199,4 +200,5 @@ def test_resume_is_exact(
         copy.set_random_seed(7)
         copy.learn(2 * episode_steps, reset_num_timesteps=False)
     assert loaded.num_timesteps == model.num_timesteps == 4 * episode_steps
+    # exact: the same seed, code and kernels in one process repeat a run bit for bit (the loaded copy too)
     assert_same_parameters(model.get_parameters(), loaded.get_parameters())
