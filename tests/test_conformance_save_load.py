@@ -67,6 +67,7 @@ def test_save_load(
 
     model = algo_class(name).load(tmp_path / "model.zip", env=env, device="cpu")
     assert model.num_timesteps == num_timesteps
+    # parameters exact (saved and read back); actions to 1e-6, as SB3's test (the same kernels: equal in practice)
     assert_same_parameters(params, model.get_parameters())
     new_actions, _ = model.predict(observations, deterministic=True)
     np.testing.assert_allclose(actions, new_actions, rtol=1e-6, atol=1e-6)
@@ -138,6 +139,7 @@ def test_save_load_policy(tmp_path: pathlib.Path, name: str, episode_steps, make
 
     loaded = type(policy).load(tmp_path / "policy.pkl", device="cpu")
     assert type(loaded) is type(policy)
+    # parameters exact (saved and read back); actions to 1e-6, as SB3's test (the same kernels: equal in practice)
     for key, value in loaded.state_dict().items():
         assert th.equal(value, params[key]), key
     new_actions, _ = loaded.predict(observations, deterministic=True)
@@ -167,6 +169,7 @@ def test_save_load_replay_buffer(tmp_path: pathlib.Path, name: str, episode_step
     arrays = [key for key, value in vars(old_buffer).items() if isinstance(value, np.ndarray)]
     assert {"observations", "actions", "rewards", "dones", "timeouts"} <= set(arrays)
     for key in arrays:  # includes algorithm-specific fields (DENFAC's behaviour means)
+        # exact: stored arrays, pickled and read back
         np.testing.assert_array_equal(getattr(buffer, key), getattr(old_buffer, key), err_msg=key)
     model.learn(episode_steps, reset_num_timesteps=False)
     assert model.replay_buffer.size() == 3 * episode_steps
