@@ -173,6 +173,7 @@ def test_each_option_trains_saves_and_reloads(tmp_path, kwargs):
     model.save(tmp_path / "model")
     loaded = DENFAC.load(tmp_path / "model")
     obs = np.array([0.3, -0.2, 0.5], dtype=np.float32)
+    # exact: the same weights through the same kernels in one process (no training between)
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
     assert loaded.frozen_targets == model.frozen_targets and loaded.reset_every == model.reset_every
     assert loaded._resets_done == model._resets_done
