@@ -65,7 +65,9 @@ def test_learns_constant_best_action(incumbent, tmp_path):
     assert np.abs(before - 0.5).mean() > 0.45  # paper init: the search starts at the ~zero policy
     model.learn(1500)
     after = model.predict(OBS, deterministic=True)[0]
-    assert np.abs(after - 0.5).mean() < 0.15  # seeds 0-4: 0.005-0.10
+    # seeds 0-9: 0.005-0.10, but 0.24 with incumbent='mean' on seed 5; each seed's result was identical under
+    # ATEN_CPU_CAPABILITY=default (the search is numpy's; other float kernels did not change the ranking of candidates)
+    assert np.abs(after - 0.5).mean() < 0.15
     assert model.best_return > -0.01 and model.generation == 1500 // (5 * model.population_size)
     header = (tmp_path / "progress.csv").read_text().splitlines()[0].split(",")
     for key in ("train/cma_sigma", "train/best_return", "train/n_updates", "rollout/ep_rew_mean", "time/fps"):
@@ -106,6 +108,7 @@ def test_save_load_exact(tmp_path):
     model.learn(13)  # 2 generations + 3 candidates of the third
     model.save(tmp_path / "cmaes.zip")
     loaded = CMAES.load(tmp_path / "cmaes.zip", env=ConstantTargetEnv(random_obs=False))
+    # exact: the same bits saved and read back, evaluated by the same kernels in one process; then the same search
     assert th.equal(_flat(model.policy), _flat(loaded.policy))
     np.testing.assert_array_equal(model.es.mean, loaded.es.mean)
     np.testing.assert_array_equal(model.es.C, loaded.es.C)
