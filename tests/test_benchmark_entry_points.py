@@ -184,6 +184,30 @@ def test_default_choice_record_script(monkeypatch, capsys):
     assert out.count("(5 vs 5)") == 2 * 4 * len(default_choice.MEASURES) and "–" not in out
 
 
+def test_frontier_critics_study_scripts(tmp_path, capsys):
+    """``research/frontier_critics``: every row of its file resolves to a constructor that builds (the soft rows a
+    SoftDENFAC), the probe runs a row of it and resumes, the actor-step diagnostic writes a line per update, and the
+    summary reads the committed runs with the suite's baseline."""
+    from research.frontier_critics import actor_step, summary
+    from research.mujoco100k import probe
+
+    rows_file = REPO / "research/frontier_critics/rows.yml"
+    out = tmp_path / "runs.jsonl"
+    args = ["--rows-file", str(rows_file), "--rows", "crossq", "soft_droq", "--envs", "Pendulum-v1", "--steps", "400"]
+    probe.main([*args, "--eval-every", "200", "--eval-episodes", "1", "--out", str(out)])
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [(r["row"], r["algo"]) for r in records] == [("crossq", "denfac"), ("soft_droq", "soft_denfac")]
+    assert all(len(r["evaluations"]) == 2 for r in records)
+    probe.main([*args, "--out", str(out)])  # resumes: nothing left to run
+    assert len(out.read_text().splitlines()) == 2
+    diag = tmp_path / "actor_step.jsonl"
+    actor_step.main(["--env", "Pendulum-v1", "--rows", "ln", "--steps", "400", "--out", str(diag)])
+    updates = json.loads(diag.read_text())["updates"]
+    assert len(updates) >= 1 and {"move", "gain", "agree", "q_spread"} <= set(updates[0])
+    table = summary.table()
+    assert "rho2 (suite)" in set(table["row"]) and set(table["env"]) <= {"Hopper-v5", "Walker2d-v5"}
+
+
 @pytest.mark.parametrize("module", ["benchmarks.rows", "benchmarks.suites", "benchmarks.hyperparams", "benchmarks.run"])
 def test_benchmark_modules_import_first_in_a_fresh_interpreter(module):
     """No import circle: each module imports on its own (the ablation's rows are data that ``suites`` reads)."""

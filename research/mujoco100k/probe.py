@@ -29,7 +29,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 
-from benchmarks.rows import load_rows
+from benchmarks.rows import algorithm, load_rows, read_rows
 
 HERE = Path(__file__).parent
 ROWS = HERE / "rows.yml"  # rows as data: each is ``base`` (another row, optional) plus its own constructor arguments
@@ -108,6 +108,7 @@ def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, 
     load = Path("/proc/loadavg").read_text().split()[:3] if Path("/proc/loadavg").exists() else None
     return {
         "row": name,
+        "algo": algo,
         "env": env_id,
         "seed": seed,
         "steps": int(model.num_timesteps),
@@ -146,6 +147,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rows-file", type=Path, default=ROWS, help="the rows' YAML file (another study's)")
     args = parser.parse_args(argv)
     rows = load_rows(args.rows_file)
+    raw = read_rows(args.rows_file)
+    for name in rows:  # the algorithm of each row (``algo``, inherited from its base)
+        rows[name]["algo"] = algorithm(raw, name)
     unknown = [r for r in args.rows if r not in rows]
     if unknown:
         parser.error(f"unknown rows {unknown}; {args.rows_file} has {sorted(rows)}")
