@@ -211,7 +211,7 @@ def test_fast_path_is_device_agnostic(make_denfac, batch_size):
     a host read of device data or a CPU-only kernel would raise. The stand-in for device="cuda" on GPU-less CI."""
     model = make_denfac(batch_size=batch_size, policy_kwargs=dict(net_arch=dict(pi=[8, 8], qf=[16, 4])))
     policy = model.policy.to("meta")
-    settings = FitSettings(3, 3, 10.0, True, batch_size, True, "none", 0.6, 0.4, 1e-3, 0.0, "min")
+    settings = FitSettings(3, 3, 10.0, True, batch_size, True, "none", 0.6, 0.4, 1e-3, 0.0, "min", True)
     fast = FastUpdater(policy, settings, *supported_networks(policy))
     n = 64
     obs, actions = th.randn(n, 3, device="meta"), th.randn(n, 1, device="meta")
@@ -269,7 +269,7 @@ def test_eager_gradients_equal_autograd(make_denfac, inverting_gradients):
     actor_grad = th.cat([g.reshape(-1) for g in actor_grad])
     policy.set_training_mode(False)
     # the eager steps' forward and backward
-    settings = FitSettings(1, 1, None, inverting_gradients, None, False, "none", 0.6, 0.4, 1e-3, 0.0, "min")
+    settings = FitSettings(1, 1, None, inverting_gradients, None, False, "none", 0.6, 0.4, 1e-3, 0.0, "min", True)
     fast = FastUpdater(policy, settings, *supported_networks(policy))
     with th.no_grad():
         x = th.cat([obs, actions], 1).t().contiguous()
