@@ -343,8 +343,13 @@ class DENFAC(
             o, a, o2, r, done, lp_b = (take(x, rows) for x in (obs, actions, next_obs, rewards, terminal, log_prob_b))
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
-                next_q, clipped = self._bootstrap_value(updater, o2, bounds)
-                q_targets = r + self.gamma * (1.0 - done) * next_q
+                discounts = self.gamma * (1.0 - done)
+                if self.frozen_targets:
+                    next_q, clipped = self._bootstrap_value(updater, o2, bounds)
+                else:  # CrossQ: one draw of the next actions, read by q_k (logged) and by every joint critic step
+                    next_actions = self._target_actions(updater, o2)
+                    next_q, clipped = clip_bootstrap(updater.critic(o2, next_actions), bounds)
+                q_targets = r + discounts * next_q
                 weights = self._importance_weights(updater, o, o2, a, lp_b)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
@@ -353,9 +358,6 @@ class DENFAC(
             if self.frozen_targets:
                 critic_loss = updater.fit_critic(o, a, q_targets, weights, batches)
             else:  # CrossQ: each step bootstraps from the critic it fits, at the iteration's next actions
-                with th.no_grad():
-                    next_actions = self._target_actions(updater, o2)
-                discounts = self.gamma * (1.0 - done)
                 critic_loss = updater.fit_critic_joint(o, a, o2, next_actions, r, discounts, weights, batches, bounds)
             if self.reset_actor:
                 updater.reset_actor()

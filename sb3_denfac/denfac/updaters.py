@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import copy
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -277,30 +278,19 @@ class AutogradUpdater(Updater):
     def fit_critic(
         self, obs: th.Tensor, actions: th.Tensor, q_targets: th.Tensor, weights: th.Tensor, batches: th.Tensor | None = None
     ) -> th.Tensor:
-        critic, settings = self.policy.critic, self.settings
-        self.fresh_bn_statistics(critic)
-        critic.set_training_mode(True)
-        loss = th.zeros(())
-        for step in range(settings.critic_steps):
+        settings = self.settings
+
+        def losses(step: int) -> list[th.Tensor]:
             idx, w = (batches[step], None) if batches is not None else self.draw(n_rows(obs), settings.prioritized != "none")
             o, a, q, c = (
                 (obs, actions, q_targets, weights)
                 if idx is None
                 else (take(obs, idx), actions[idx], q_targets[idx], weights[idx])
             )
-            critic.optimizer.zero_grad(set_to_none=True)
-            losses = []
-            for q_value in critic.all_q(o, a):  # each Q network on the same mini-batch and targets
-                errors = c * (q_value - q).pow(2)
-                losses.append((errors if w is None else w * errors).mean())
-            sum(losses).backward()
-            if settings.max_grad_norm is not None:  # each Q network's own norm, as if it were alone
-                for group in self.clip_groups:
-                    clip_grad_norm_(group, settings.max_grad_norm)
-            critic.optimizer.step()
-            loss = losses[0]
-        critic.set_training_mode(False)
-        return loss.detach()
+            errors = [c * (q_value - q).pow(2) for q_value in self.policy.critic.all_q(o, a)]  # each Q network, same rows
+            return [(e if w is None else w * e).mean() for e in errors]
+
+        return self._critic_steps(losses)
 
     def fit_critic_joint(
         self,
@@ -314,22 +304,33 @@ class AutogradUpdater(Updater):
         batches: th.Tensor | None,
         bounds: tuple[float, float] | None,
     ) -> th.Tensor:
+        critic = self.policy.critic
+
+        def losses(step: int) -> list[th.Tensor]:
+            idx = batches[step] if batches is not None else self.batch_indices(n_rows(obs))
+            o, a, o2, a2 = take(obs, idx), take(actions, idx), take(next_obs, idx), take(next_actions, idx)
+            r, g, c = take(rewards, idx), take(discounts, idx), take(weights, idx)
+            n = n_rows(o)
+            # one forward pass of (s, a) and (s', a') together: the batch statistics of both (CrossQ)
+            values = critic.all_q(stack_rows(o, o2), th.cat([a, a2]))
+            with th.no_grad():
+                next_q, _ = clip_bootstrap(critic.combine([v[n:] for v in values], self.settings.critic_target), bounds)
+                q = r + g * next_q
+            return [(c * (v[:n] - q).pow(2)).mean() for v in values]
+
+        return self._critic_steps(losses)
+
+    def _critic_steps(self, step_losses: Callable[[int], list[th.Tensor]]) -> th.Tensor:
+        """``critic_steps`` Adam steps of the critic in training mode, step i on the sum of ``step_losses(i)`` (one
+        loss per Q network), each Q network's gradient clipped to its own norm as if it were alone; returns the last
+        step's loss of Q_1."""
         critic, settings = self.policy.critic, self.settings
         self.fresh_bn_statistics(critic)
         critic.set_training_mode(True)
         loss = th.zeros(())
         for step in range(settings.critic_steps):
-            idx = batches[step] if batches is not None else self.batch_indices(n_rows(obs))
-            o, a, o2, a2 = take(obs, idx), take(actions, idx), take(next_obs, idx), take(next_actions, idx)
-            r, g, c = take(rewards, idx), take(discounts, idx), take(weights, idx)
-            n = n_rows(o)
             critic.optimizer.zero_grad(set_to_none=True)
-            # one forward pass of (s, a) and (s', a') together: the batch statistics of both (CrossQ)
-            values = critic.all_q(stack_rows(o, o2), th.cat([a, a2]))
-            with th.no_grad():
-                next_q, _ = clip_bootstrap(critic.combine([v[n:] for v in values], settings.critic_target), bounds)
-                q = r + g * next_q
-            losses = [(c * (v[:n] - q).pow(2)).mean() for v in values]
+            losses = step_losses(step)
             sum(losses).backward()
             if settings.max_grad_norm is not None:
                 for group in self.clip_groups:
