@@ -1,4 +1,4 @@
-"""sb3-contrib's documentation convention for the package's five algorithms, on the tiny variants of ``conftest.py``."""
+"""sb3-contrib's documentation convention for the package's six algorithms, on the tiny variants of ``conftest.py``."""
 
 from __future__ import annotations
 

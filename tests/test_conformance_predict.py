@@ -1,4 +1,4 @@
-"""SB3's plugin contract for the package's five algorithms: deterministic training, predict, batch-norm train/eval
+"""SB3's plugin contract for the package's six algorithms: deterministic training, predict, batch-norm train/eval
 mode (after SB3's tests/test_deterministic.py, test_predict.py, test_train_eval_mode.py), on the tiny variants of
 ``conftest.py``.
 """

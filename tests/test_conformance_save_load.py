@@ -1,4 +1,4 @@
-"""SB3's plugin contract for the package's five algorithms: save/load, set_env, policy and replay-buffer files, file
+"""SB3's plugin contract for the package's six algorithms: save/load, set_env, policy and replay-buffer files, file
 objects, an old model's removed option (after SB3's tests/test_save_load.py). The tiny variants and helpers are the
 fixtures of ``conftest.py``; the other parts: ``test_conformance_{predict,docs,logging,spaces,training}.py``.
 """

@@ -45,7 +45,7 @@ class DiscreteActionEnv(gym.Env):
 @pytest.mark.algorithms("all")
 def test_discrete_action_space_is_refused(name: str, action_space: spaces.Space, episode_steps, make_model) -> None:
     env = gym.wrappers.TimeLimit(DiscreteActionEnv(action_space), max_episode_steps=episode_steps)
-    with pytest.raises(UnsupportedSpaceError) as error:  # one type for all five algorithms
+    with pytest.raises(UnsupportedSpaceError) as error:  # one type for all six algorithms
         make_model(name, env=env)
     assert isinstance(error.value, ValueError) and isinstance(error.value, AssertionError)  # SB3-style callers catch it
     message = str(error.value)

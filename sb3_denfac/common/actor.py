@@ -1,4 +1,4 @@
-"""The deterministic actor mu(s) of the five algorithms, and the one ``net_arch`` parser.
+"""The deterministic actor mu(s) of the algorithms other than SoftDENFAC (SAC's actor), and the one ``net_arch`` parser.
 
 Paper, section 4: "The actor policy is a truncated Gaussian policy [...] where the mean is determined by the output of
 the last linear layer"; every algorithm of the paper, CMA-ES included, uses that actor network. mu(s) is

@@ -1,4 +1,4 @@
-"""Torch threads inside ``learn()``: one setting, ``torch_threads``, shared by the five algorithms.
+"""Torch threads inside ``learn()``: one setting, ``torch_threads``, shared by the six algorithms.
 
 The package's networks are tiny (tens of units): splitting their matrix products over several intra-op threads only
 adds synchronisation, and on a machine whose cores are busy with other work the waiting dominates. Measured on a

@@ -173,7 +173,7 @@ def check_env_id(env_id: str, where: str = "") -> None:
 
 def check_action_space_fits(algo: str, env_id: str) -> None:
     """Fail, naming the action space, if ``env_id`` has no continuous action space and ``algo`` is one of this
-    package's algorithms (all five need a ``gymnasium.spaces.Box`` with finite bounds). Checked before any YAML entry
+    package's algorithms (all six need a ``gymnasium.spaces.Box`` with finite bounds). Checked before any YAML entry
     is read, so a Discrete env is not reported as a problem of the entry. Envs that cannot be made with their default
     arguments are left to the zoo."""
     if algo not in ALGORITHMS:
@@ -195,7 +195,7 @@ def check_action_space_fits(algo: str, env_id: str) -> None:
         return
     raise ZooConfigError(
         f"{env_id} has the action space {space}, but {algo} needs a continuous action space (gymnasium.spaces.Box with "
-        f"finite bounds), as all five algorithms of sb3_denfac ({', '.join(ALGORITHMS)}) do. Pick a continuous-action "
+        f"finite bounds), as all six algorithms of sb3_denfac ({', '.join(ALGORITHMS)}) do. Pick a continuous-action "
         f"env, e.g. Pendulum-v1 or one of this package's: {', '.join(ALL_ENV_IDS)}"
     )
 

@@ -21,7 +21,8 @@ USAGE = """usage: sb3-denfac-zoo {train,optimize,enjoy,record_video} [zoo option
   enjoy         rl_zoo3 enjoy (default --num-threads 1)
   record_video  rl_zoo3 record_video
 
-Algorithms: denfac, ddpg (ours, inverting gradients), nfac, cacla, cmaes, plus the zoo's (td3, sac, crossq, sb3_ddpg, ...).
+Algorithms: denfac, soft_denfac, ddpg (ours, inverting gradients), nfac, cacla, cmaes,
+plus the zoo's (td3, sac, crossq, sb3_ddpg, ...).
 Run `sb3-denfac-zoo train --help` for the zoo's options."""
 
 
