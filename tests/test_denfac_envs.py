@@ -15,7 +15,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from sb3_denfac import DENFAC, SoftDENFAC
 from sb3_denfac.common.callbacks import UpdateStatsCallback
-from sb3_denfac.denfac.learner import THREAD_NAME
+from sb3_denfac.common.learner import THREAD_NAME
 
 #: K_e = ceil(rho n / critic_steps) = n, the episode's length: the updates say which episodes they were for
 PER_STEP = dict(

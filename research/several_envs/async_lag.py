@@ -1,6 +1,6 @@
 """Is the asynchronous update's cost on Reacher its one-update lag? DENFAC's updates run in place (no thread), but the
 episodes are played by the actor from before the last update (``Stale``, a subclass overriding the documented
-``train`` and ``_exploration_mean`` hooks), against DENFAC as it is; Reacher-v5, seeds 0-1, the deterministic return
+``train`` and ``_explore`` hooks), against DENFAC as it is; Reacher-v5, seeds 0-1, the deterministic return
 of 5 episodes after every 4 training episodes.
 
     python -m research.several_envs.async_lag
@@ -16,6 +16,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_denfac import DENFAC
+from sb3_denfac.common.truncated_normal import clamp_mean, sample_truncated_normal
 
 
 class Stale(DENFAC):
@@ -28,13 +29,13 @@ class Stale(DENFAC):
         self.stale, self.previous = self.previous, copy.deepcopy(self.policy.actor)
         super().train(gradient_steps, batch_size)
 
-    def _exploration_mean(self, observation):  # type: ignore[override]
+    def _explore(self, observation):  # type: ignore[override]
         actor = self.stale or self.policy.actor
         actor.set_training_mode(False)
         obs, _ = self.policy.obs_to_tensor(observation)
         with th.no_grad():
-            mean = actor(obs)
-        return mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
+            mean = actor(obs).cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
+        return sample_truncated_normal(mean, self.sigma, -1.0, 1.0), clamp_mean(mean, -1.0, 1.0, self.sigma)
 
 
 def main() -> None:

@@ -1,21 +1,22 @@
 """Input checks shared by the package's algorithms, built on SB3's own tooling.
 
-- :class:`FiniteInputsMixin` checks every environment an algorithm is given (constructor, ``set_env``,
-  ``load(env=...)``): a NaN or inf in an observation (at reset or step), a reward or an action raises a ``ValueError``
-  naming which (``found nan in rewards``, ``found inf in observations``...) instead of silently turning the networks'
-  weights into NaN. In-process envs get a gym-level :class:`FiniteCheckWrapper` per sub-env, other VecEnvs SB3's
+Add :class:`InputChecksMixin` as the FIRST base of an algorithm class (``class DENFAC(InputChecksMixin, ...,
+EpisodicOffPolicyAlgorithm)``). It checks:
+
+- every environment an algorithm is given (constructor, ``set_env``, ``load(env=...)``): a NaN or inf in an
+  observation (at reset or step), a reward or an action raises a ``ValueError`` naming which (``found nan in
+  rewards``, ``found inf in observations``...) instead of silently turning the networks' weights into NaN. In-process
+  envs get a gym-level :class:`FiniteCheckWrapper` per sub-env, other VecEnvs SB3's
   :class:`~stable_baselines3.common.vec_env.VecCheckNan` with ``raise_exception=True`` (see :func:`wrap_check_finite`).
   The same hook refuses an action space that is not a Box with finite bounds with an :class:`UnsupportedSpaceError`
-  (a ``ValueError`` that is also an ``AssertionError``, SB3's type for unsupported spaces). ``predict`` refuses a
-  NaN/inf observation with the same message, unless ``model.allow_non_finite_predict = True``.
-- :class:`~.model_files.ModelFileCheckMixin` (:mod:`~.model_files`) makes ``load`` refuse a truncated, corrupted or
-  missing model file, or one another algorithm saved, with an error naming the problem.
-- :class:`LearnChecksMixin` makes ``learn`` without an environment, or with a replay buffer of another algorithm or
-  environment (``load_replay_buffer``), a ``ValueError`` saying so.
-- :class:`InputChecksMixin` is all three, and refuses a preset of another algorithm given to the constructor by name
-  (:func:`check_preset_keywords`); add it as the FIRST base of an algorithm class::
-
-      class DENFAC(InputChecksMixin, TruncatedGaussianExplorationMixin, OffPolicyAlgorithm): ...
+  (a ``ValueError`` that is also an ``AssertionError``, SB3's type for unsupported spaces);
+- ``predict``: a NaN/inf observation is refused with the same message, unless ``model.allow_non_finite_predict = True``;
+- ``load``: a truncated, corrupted or missing model file, or one another algorithm saved, is refused with an error
+  naming the problem (:func:`~.model_files.check_loadable`);
+- ``learn`` without an environment, or with a replay buffer of another algorithm or environment
+  (``load_replay_buffer``): a ``ValueError`` saying so;
+- ``"MultiInputPolicy"`` for an algorithm without Dict observations: the cause, named;
+- the constructor: a preset of another algorithm is refused by name (:func:`check_preset_keywords`).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from stable_baselines3.common.preprocessing import get_action_dim, get_obs_shape
 from stable_baselines3.common.type_aliases import GymEnv
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecEnv, VecEnvWrapper
 
-from sb3_denfac.common.model_files import ModelFileCheckMixin
+from sb3_denfac.common.model_files import check_loadable
 
 
 def _non_finite(name: str, value: Any) -> list[str]:
@@ -145,55 +146,6 @@ def check_observation_space(algorithm: str, space: spaces.Space, multi_input: bo
         raise _no_dict_observations(algorithm, f"the env's observation space is a {type(space).__name__}{keys}")
 
 
-class PolicyNameMixin:
-    """SB3 answers ``"MultiInputPolicy"`` with "Policy MultiInputPolicy unknown": this names the cause instead."""
-
-    policy_aliases: dict[str, type[BasePolicy]]
-
-    def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
-        if policy_name == MULTI_INPUT_POLICY and policy_name not in self.policy_aliases:
-            raise _no_dict_observations(type(self).__name__, "Dict observation spaces are not supported yet")
-        return super()._get_policy_from_name(policy_name)  # type: ignore[misc]
-
-
-class FiniteInputsMixin:
-    """Raise a ``ValueError`` on NaN/inf observations, rewards or actions (:func:`wrap_check_finite`), see module doc.
-
-    Overrides BaseAlgorithm's static ``_wrap_env`` with a classmethod (``self._wrap_env`` and ``cls._wrap_env`` both
-    still work), so the check covers the constructor, ``set_env`` and ``load``. ``predict`` refuses a non-finite
-    observation the same way, unless :attr:`allow_non_finite_predict` is set.
-    """
-
-    #: True lets ``predict`` take observations holding NaN or inf (the actions are then what the networks make of
-    #: them, often NaN); ``learn`` refuses them regardless. Set it on the model: ``model.allow_non_finite_predict = True``.
-    allow_non_finite_predict: bool = False
-
-    def predict(
-        self,
-        observation: Any,
-        state: tuple[np.ndarray, ...] | None = None,
-        episode_start: np.ndarray | None = None,
-        deterministic: bool = False,
-    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
-        if not self.allow_non_finite_predict:
-            issues = _non_finite("observations", observation)
-            if issues:
-                name = type(self).__name__
-                raise ValueError(
-                    f"found {', found '.join(issues)}. Originated from the observation given to {name}.predict() "
-                    f"(to let non-finite observations through predict, set model.allow_non_finite_predict = True)"
-                )
-        return super().predict(observation, state, episode_start, deterministic)  # type: ignore[misc]
-
-    @classmethod
-    def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
-        wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
-        check_action_space(cls.__name__, wrapped.action_space)  # before SB3's own assert (one error type for all)
-        multi_input = MULTI_INPUT_POLICY in getattr(cls, "policy_aliases", {})
-        check_observation_space(cls.__name__, wrapped.observation_space, multi_input)  # before SB3's "use MultiInputPolicy"
-        return wrap_check_finite(wrapped)
-
-
 def check_replay_buffer(model: Any) -> None:
     """Raise a ``ValueError`` if an off-policy ``model``'s replay buffer does not fit it (e.g. a buffer loaded with
     ``load_replay_buffer`` from another algorithm, env or number of envs); no-op without a replay buffer."""
@@ -221,20 +173,6 @@ def check_replay_buffer(model: Any) -> None:
         )
 
 
-class LearnChecksMixin:
-    """Checks at the start of ``learn``: an environment is set (instead of SB3's bare ``assert self.env is not None``,
-    e.g. after ``load(path)`` without ``env=``) and the replay buffer fits (:func:`check_replay_buffer`)."""
-
-    env: VecEnv | None
-
-    def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
-        if self.env is None:
-            name = type(self).__name__
-            raise ValueError(f"{name}.learn() needs an environment: pass env= to {name}.load(...) or call set_env(env) first")
-        check_replay_buffer(self)
-        return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
-
-
 def check_preset_keywords(cls: type, keywords: dict[str, Any]) -> None:
     """Refuse a preset of another algorithm given to ``cls``'s constructor (``SoftDENFAC(..., **presets.PAPER)``) with a
     ``TypeError`` (Python's type for an unexpected keyword argument) that names the preset, its algorithm and the keys
@@ -252,16 +190,69 @@ def check_preset_keywords(cls: type, keywords: dict[str, Any]) -> None:
             raise TypeError(message)
 
 
-class InputChecksMixin(PolicyNameMixin, FiniteInputsMixin, ModelFileCheckMixin, LearnChecksMixin):
-    """All checks of this module; put it first in an algorithm's bases."""
+class InputChecksMixin:
+    """All checks of this module (module docstring); put it first in an algorithm's bases.
+
+    Overrides BaseAlgorithm's static ``_wrap_env`` with a classmethod (``self._wrap_env`` and ``cls._wrap_env`` both
+    still work), so the check of the env covers the constructor, ``set_env`` and ``load``.
+    """
+
+    policy_aliases: dict[str, type[BasePolicy]]
+    env: VecEnv | None
+    #: True lets ``predict`` take observations holding NaN or inf (the actions are then what the networks make of
+    #: them, often NaN); ``learn`` refuses them regardless. Set it on the model: ``model.allow_non_finite_predict = True``.
+    allow_non_finite_predict: bool = False
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Any:
         check_preset_keywords(cls, kwargs)  # before Python binds the arguments (its TypeError would name one key)
         return super().__new__(cls)
 
+    def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
+        # SB3 answers "MultiInputPolicy" with "Policy MultiInputPolicy unknown": this names the cause instead
+        if policy_name == MULTI_INPUT_POLICY and policy_name not in self.policy_aliases:
+            raise _no_dict_observations(type(self).__name__, "Dict observation spaces are not supported yet")
+        return super()._get_policy_from_name(policy_name)  # type: ignore[misc]
+
+    def predict(
+        self,
+        observation: Any,
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        if not self.allow_non_finite_predict:
+            issues = _non_finite("observations", observation)
+            if issues:
+                name = type(self).__name__
+                raise ValueError(
+                    f"found {', found '.join(issues)}. Originated from the observation given to {name}.predict() "
+                    f"(to let non-finite observations through predict, set model.allow_non_finite_predict = True)"
+                )
+        return super().predict(observation, state, episode_start, deterministic)  # type: ignore[misc]
+
+    @classmethod
+    def _wrap_env(cls, env: GymEnv, verbose: int = 0, monitor_wrapper: bool = True) -> VecEnv:
+        wrapped = super()._wrap_env(env, verbose, monitor_wrapper)  # type: ignore[misc]
+        check_action_space(cls.__name__, wrapped.action_space)  # before SB3's own assert (one error type for all)
+        multi_input = MULTI_INPUT_POLICY in getattr(cls, "policy_aliases", {})
+        check_observation_space(cls.__name__, wrapped.observation_space, multi_input)  # before SB3's "use MultiInputPolicy"
+        return wrap_check_finite(wrapped)
+
+    @classmethod
+    def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
+        check_loadable(cls, path, kwargs.get("custom_objects"))
+        return super().load(path, *args, **kwargs)  # type: ignore[misc]
+
+    def _setup_learn(self, *args: Any, **kwargs: Any) -> Any:
+        if self.env is None:  # instead of SB3's bare assert, e.g. after load(path) without env=
+            name = type(self).__name__
+            raise ValueError(f"{name}.learn() needs an environment: pass env= to {name}.load(...) or call set_env(env) first")
+        check_replay_buffer(self)
+        return super()._setup_learn(*args, **kwargs)  # type: ignore[misc]
+
 
 # ---------------------------------------------------------------------------------------------- hyperparameter checks
-# The one set of constructor-argument validators of the five algorithms: each raises a ValueError whose message starts
+# The one set of constructor-argument validators of the six algorithms: each raises a ValueError whose message starts
 # with the parameter's name and returns the value as the algorithm stores it (Python int/float: SB3's schedules and
 # JSON saving want Python scalars, not the numpy scalars YAML or Optuna may give).
 

@@ -22,9 +22,10 @@ Stable API (other algorithms rely on it):
   in the scaled space, as output by the actor (not clamped: clamp with ``truncated_normal.clamp_mean`` or let
   ``truncated_normal_log_prob`` do it). Rows are NaN for uniform warm-up actions (see below). Not updated when
   ``sigma is None`` (SB3's own exploration).
-- ``_exploration_mean(obs) -> np.ndarray``: the deterministic actor output mu(s) in the scaled space, unclipped: the
-  forward pass of ``self.policy.actor`` (SB3's convention for TD3/DDPG actors, whose ``forward`` returns mu(s) while
-  ``_predict`` may clip it), in eval mode. Override it only for a policy without such an ``actor``.
+- :func:`exploration_mean`: the deterministic actor output mu(s) in the scaled space, unclipped: the forward pass of
+  ``policy.actor`` (SB3's convention for TD3/DDPG actors, whose ``forward`` returns mu(s) while ``_predict`` may clip
+  it), in eval mode; :func:`truncated_gaussian_actions` and :func:`warm_up_actions` draw from it or uniformly (the
+  episodic base, :mod:`~sb3_denfac.common.episodic`, calls them without the mixin).
 - :func:`behaviour_log_prob`: log pi_b(a|s) for stored (action, behaviour mean) pairs, NaN means -> uniform density.
 
 Warm-up: while ``num_timesteps < learning_starts`` actions are drawn uniformly from the action space, like SB3
@@ -63,6 +64,32 @@ def behaviour_log_prob(
     return th.where(uniform_rows, uniform, log_prob)
 
 
+def exploration_mean(policy: Any, action_space: spaces.Box, observation: Any) -> np.ndarray:
+    """The deterministic actor output mu(s) in the scaled [-1, 1] space, unclipped, shape (n_envs, action_dim): the
+    forward pass of ``policy.actor`` in eval mode."""
+    policy.set_training_mode(False)
+    obs_tensor, _ = policy.obs_to_tensor(observation)
+    with th.no_grad():
+        mean = policy.actor(obs_tensor)
+    return mean.cpu().numpy().reshape((-1, *action_space.shape)).astype(np.float32)
+
+
+def warm_up_actions(policy: Any, action_space: spaces.Box, n_envs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform actions of the warm-up (``learning_starts``), as SB3: the actions in the scaled [-1, 1] space, and NaN
+    behaviour means that mark them (:func:`behaviour_log_prob`)."""
+    unscaled = np.array([action_space.sample() for _ in range(n_envs)])
+    buffer_action = policy.scale_action(unscaled).astype(np.float32)
+    return buffer_action, np.full_like(buffer_action, np.nan)
+
+
+def truncated_gaussian_actions(
+    policy: Any, action_space: spaces.Box, observation: Any, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Actions drawn from N(mu(s), sigma^2) truncated to [-1, 1] (the scaled space), and the behaviour means mu(s)."""
+    mean = exploration_mean(policy, action_space, observation)
+    return sample_truncated_normal(mean, sigma, -1.0, 1.0), mean
+
+
 class TruncatedGaussianExplorationMixin:
     """Replace SB3's additive-noise exploration with a truncated Gaussian around the actor output (see module doc).
 
@@ -78,28 +105,16 @@ class TruncatedGaussianExplorationMixin:
     num_timesteps: int
     _last_obs: Any
 
-    def _exploration_mean(self, observation: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        """Deterministic actor output mu(s) in the scaled [-1, 1] space, unclipped, shape (n_envs, action_dim)."""
-        self.policy.set_training_mode(False)
-        obs_tensor, _ = self.policy.obs_to_tensor(observation)
-        with th.no_grad():
-            mean = self.policy.actor(obs_tensor)
-        return mean.cpu().numpy().reshape((-1, *self.action_space.shape)).astype(np.float32)
-
     def _sample_action(
         self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
         if self.sigma is None:
             return super()._sample_action(learning_starts, action_noise, n_envs)  # type: ignore[misc]
         assert isinstance(self.action_space, spaces.Box), "truncated Gaussian exploration needs a Box action space"
-        if self.num_timesteps < learning_starts:
-            # Warm-up, as SB3: uniform actions; NaN behaviour means mark them (see behaviour_log_prob).
-            unscaled = np.array([self.action_space.sample() for _ in range(n_envs)])
-            buffer_action = self.policy.scale_action(unscaled).astype(np.float32)
-            mean = np.full_like(buffer_action, np.nan)
+        if self.num_timesteps < learning_starts:  # warm-up, as SB3: uniform actions
+            buffer_action, mean = warm_up_actions(self.policy, self.action_space, n_envs)
         else:
             assert self._last_obs is not None, "self._last_obs was not set"
-            mean = self._exploration_mean(self._last_obs)
-            buffer_action = sample_truncated_normal(mean, self.sigma, -1.0, 1.0)
+            buffer_action, mean = truncated_gaussian_actions(self.policy, self.action_space, self._last_obs, self.sigma)
         self._last_behaviour_mean = mean
         return self.policy.unscale_action(buffer_action), buffer_action

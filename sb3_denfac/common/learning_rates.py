@@ -54,6 +54,3 @@ class ActorCriticRatesMixin:
         """Apply alpha_a and alpha_c at the current progress and log them (``train/actor_learning_rate``...)."""
         for net, rate in self._apply_learning_rates(self._current_progress_remaining).items():
             self.logger.record(f"train/{net}_learning_rate", rate)
-
-    def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "actor_lr_schedule", "critic_lr_schedule"]  # type: ignore[misc]

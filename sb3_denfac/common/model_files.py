@@ -1,5 +1,5 @@
-"""Model files as SB3's ``load`` reads them, checked before it does (:class:`ModelFileCheckMixin`, one of
-:class:`~.checks.InputChecksMixin`'s bases) and read for single values (:func:`stored_values`).
+"""Model files as SB3's ``load`` reads them, checked before it does (:func:`check_loadable`, called by
+:class:`~.checks.InputChecksMixin`'s ``load``) and read for single values (:func:`stored_values`).
 
 ``load`` refuses, with an error naming the problem, a missing file (naming the paths tried, where SB3 names
 ``model.zip.zip``), a truncated or corrupted model zip (SB3 itself only asserts "No data found") and a zip that another
@@ -15,7 +15,6 @@ import zipfile
 from collections.abc import Iterator
 from typing import Any
 
-from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import json_to_data
 
 
@@ -105,23 +104,18 @@ def check_model_file_exists(algorithm: str, path: Any) -> None:
     )
 
 
-class ModelFileCheckMixin:
-    """``load`` refuses, with a ``ValueError`` naming the problem, a file that is not a complete SB3 model zip
-    (:func:`check_model_zip`) or whose policy class is none of this algorithm's ``policy_aliases`` (a zip saved by
-    another algorithm)."""
-
-    policy_aliases: dict[str, type[BasePolicy]]
-
-    @classmethod
-    def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
-        check_model_file_exists(cls.__name__, path)
-        policy_class = check_model_zip(path)
-        policy_class = (kwargs.get("custom_objects") or {}).get("policy_class", policy_class)
-        allowed = tuple(cls.policy_aliases.values())
-        if allowed and isinstance(policy_class, type) and not issubclass(policy_class, allowed):
-            raise ValueError(
-                f"{cls.__name__}.load: this model was saved by another algorithm (its policy is "
-                f"{policy_class.__module__}.{policy_class.__qualname__}, {cls.__name__} expects a subclass of "
-                f"{', '.join(c.__name__ for c in allowed)}); load it with the class that saved it"
-            )
-        return super().load(path, *args, **kwargs)  # type: ignore[misc]
+def check_loadable(algorithm: type, path: Any, custom_objects: dict[str, Any] | None) -> None:
+    """Refuse, with an error naming the problem, a ``path`` that ``algorithm.load`` cannot read: a missing file, one
+    that is not a complete SB3 model zip (:func:`check_model_zip`), or one whose policy class is none of the
+    algorithm's ``policy_aliases`` (a zip saved by another algorithm; ``custom_objects`` may replace the class)."""
+    name = algorithm.__name__
+    check_model_file_exists(name, path)
+    policy_class = check_model_zip(path)
+    policy_class = (custom_objects or {}).get("policy_class", policy_class)
+    allowed = tuple(getattr(algorithm, "policy_aliases", {}).values())
+    if allowed and isinstance(policy_class, type) and not issubclass(policy_class, allowed):
+        raise ValueError(
+            f"{name}.load: this model was saved by another algorithm (its policy is "
+            f"{policy_class.__module__}.{policy_class.__qualname__}, {name} expects a subclass of "
+            f"{', '.join(c.__name__ for c in allowed)}); load it with the class that saved it"
+        )

@@ -3,72 +3,34 @@
 from __future__ import annotations
 
 import time
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
 from sb3_contrib.common.torch_layers import BatchRenorm
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.noise import ActionNoise
-from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, Schedule
 
-from sb3_denfac.common.budget import StopAtTotalTimestepsMixin
 from sb3_denfac.common.callbacks import ProgressBarMixin
-from sb3_denfac.common.checks import (
-    InputChecksMixin,
-)
-from sb3_denfac.common.compat import (
-    denfac_attributes_of_old_files,
-    record_policy_defaults,
-    upgrade_denfac,
-)
+from sb3_denfac.common.checks import InputChecksMixin
+from sb3_denfac.common.compat import denfac_attributes_of_old_files, record_policy_defaults, upgrade_denfac
 from sb3_denfac.common.device import warn_about_device
-from sb3_denfac.common.episode_ends import EpisodeEndsMixin
-from sb3_denfac.common.exploration import TruncatedGaussianExplorationMixin, behaviour_log_prob
+from sb3_denfac.common.episodic import EpisodicOffPolicyAlgorithm
+from sb3_denfac.common.exploration import behaviour_log_prob, truncated_gaussian_actions
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
-from sb3_denfac.common.threads import TorchThreadsMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
-from sb3_denfac.denfac.buffers import (
-    BehaviourMeansBuffer,
-    DENFACReplayBufferSamples,
-    check_holds_one_episode,
-    n_rows,
-    take,
-)
+from sb3_denfac.denfac.buffers import BehaviourMeansBuffer, DENFACReplayBufferSamples, check_holds_one_episode, n_rows, take
 from sb3_denfac.denfac.her import replay_buffer_class_for
-from sb3_denfac.denfac.learner import AsyncUpdateMixin
-from sb3_denfac.denfac.options import (
-    FittedIterations,
-    bootstrap_range,
-    clip_bootstrap,
-    fitted_iterations,
-)
+from sb3_denfac.denfac.options import FittedIterations, bootstrap_range, clip_bootstrap, fitted_iterations
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
 from sb3_denfac.denfac.settings import SETTINGS, check_settings, warn_ignored_settings
-from sb3_denfac.denfac.update_paths import (
-    DENFAC_UPDATERS,
-    UpdaterClasses,
-    check_update_path,
-    make_updater,
-)
+from sb3_denfac.denfac.update_paths import DENFAC_UPDATERS, UpdaterClasses, check_update_path, make_updater
 from sb3_denfac.denfac.updaters import FitResult, FitSettings, Updater, UpdateStats
 
-SelfDENFAC = TypeVar("SelfDENFAC", bound="DENFAC")
 
-
-class DENFAC(
-    InputChecksMixin,
-    TorchThreadsMixin,
-    ProgressBarMixin,
-    AsyncUpdateMixin,
-    EpisodeEndsMixin,
-    StopAtTotalTimestepsMixin,
-    ActorCriticRatesMixin,
-    TruncatedGaussianExplorationMixin,
-    OffPolicyAlgorithm,
-):
+class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, EpisodicOffPolicyAlgorithm):
     """Data Efficient Neural Fitted Actor Critic (DENFAC).
 
     Zimmer, Boniface & Dutech, "Off-Policy Neural Fitted Actor-Critic", section 3, eqs. (4)-(5) and Algorithm 1;
@@ -84,7 +46,7 @@ class DENFAC(
     :param policy: the policy model ("MlpPolicy"; "MultiInputPolicy" for Dict observations, SB3's CombinedExtractor;
         or a :class:`DENFACPolicy` subclass)
     :param env: the environment, or a VecEnv of several: an update after each env's finished episode
-        (:mod:`~sb3_denfac.common.episode_ends`)
+        (:mod:`~sb3_denfac.common.episodic`)
     :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
         (:mod:`~sb3_denfac.common.learning_rates`; paper, Figure 5: alpha_a = alpha_c = 0.1)
     :param actor_learning_rate: alpha_a, the actor's Adam step size (float or schedule); None means ``learning_rate``
@@ -140,8 +102,8 @@ class DENFAC(
         every ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high
         update-to-data ratios: SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
-        the last published policy plays (:mod:`~.learner`: what changes; default False: the update runs between
-        episodes, reproducible from the seed)
+        the last published policy plays (:mod:`~sb3_denfac.common.episodic`: what changes; default False: the update
+        runs between episodes, reproducible from the seed)
     :param replay_buffer_class: D's class: None (:class:`~.buffers.DENFACReplayBuffer`, or
         :class:`~.buffers.DENFACDictReplayBuffer` for Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals:
         :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them
@@ -273,23 +235,17 @@ class DENFAC(
         self.critic = self.policy.critic
 
     # ----- execution -----------------------------------------------------------------------------------------------
-    def _sample_action(
-        self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
-    ) -> tuple[np.ndarray, np.ndarray]:
-        if action_noise is not None:
-            raise ValueError(f"{type(self).__name__} explores with its own policy; action_noise is not supported")
-        return super()._sample_action(learning_starts, None, n_envs)  # truncated Gaussian, or uniform warm-up
-
-    def _store_transition(self, replay_buffer: ReplayBuffer, buffer_action: np.ndarray, *args: Any, **kwargs: Any) -> None:
-        assert isinstance(replay_buffer, BehaviourMeansBuffer)
-        # D stores mu_b(s) clamped to [-1 - 3 sigma, 1 + 3 sigma], as the authors' code (NaN warm-up rows stay NaN)
-        replay_buffer.stage_behaviour_means(clamp_mean(self._last_behaviour_mean, -1.0, 1.0, self.sigma), self.weighting)
-        super()._store_transition(replay_buffer, buffer_action, *args, **kwargs)
+    def _explore(self, observation: Any) -> tuple[np.ndarray, np.ndarray]:
+        """a ~ N(mu(s), sigma^2) truncated to [-1, 1] (paper, section 4); D stores mu_b(s) clamped to
+        [-1 - 3 sigma, 1 + 3 sigma], as the authors' code."""
+        assert isinstance(self.action_space, spaces.Box)
+        actions, means = truncated_gaussian_actions(self.policy, self.action_space, observation, self.sigma)
+        return actions, clamp_mean(means, -1.0, 1.0, self.sigma)
 
     # ----- Algorithm 1 ---------------------------------------------------------------------------------------------
     def train(self, gradient_steps: int, batch_size: int | None = None) -> None:
         """The updates of Algorithm 1 over the whole replay buffer due now: one per finished episode
-        (:mod:`~sb3_denfac.common.episode_ends`; with one env ``gradient_steps`` is its length, SB3's
+        (:mod:`~sb3_denfac.common.episodic`; with one env ``gradient_steps`` is its length, SB3's
         ``gradient_steps=-1``), each with K_e fitted iterations from its length and ``update_to_data_ratio``."""
         lengths = self._finished_episodes(gradient_steps)
         if not lengths:
@@ -300,7 +256,7 @@ class DENFAC(
             return  # batch statistics of a single transition are undefined (a first episode of one step): wait
         k = self.n_fitted_iterations, self.critic_steps, self.update_to_data_ratio
         iterations = [fitted_iterations(*k, n) for n in lengths]
-        self._run_updates(iterations, reset=self._reset_due())  # here or on the learner thread (learner.py)
+        self._run_updates(iterations, self._reset_due())  # here or on the learner thread (common/episodic.py)
 
     def _reset_due(self) -> bool:
         """Whether this update starts from re-initialised networks (``reset_every``): the first at or past each multiple
@@ -323,7 +279,16 @@ class DENFAC(
             if not isinstance(self.n_fitted_iterations, int):
                 raise ValueError("n_fitted_iterations is a range for update_to_data_ratio: pass _update the iterations")
             n_iterations = self.n_fitted_iterations
-        self._run_updates([n_iterations])
+        self._run_updates([n_iterations], False)
+
+    def _fit_all(self, policy: DENFACPolicy, data: DENFACReplayBufferSamples, iterations: list[int], reset: bool) -> list:
+        """The updates of ``policy`` on D's content ``data``, back to back, ``iterations[i]`` fitted iterations each: a
+        new updater for each, made after the previous one finished; with ``reset`` (``reset_every``), ``policy``'s actor
+        and critic re-initialised first."""
+        if reset:
+            policy.reset_actor()
+            policy.reset_critic()
+        return [self._fit(self.make_updater(policy), data, n) for n in iterations]
 
     def _fit(self, updater: Updater, data: DENFACReplayBufferSamples, n_iterations: int) -> FitResult:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` fitted iterations over D (``data``, the
@@ -427,24 +392,6 @@ class DENFAC(
         return truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
 
     # ----- SB3 plumbing --------------------------------------------------------------------------------------------
-    def learn(
-        self: SelfDENFAC,
-        total_timesteps: int,
-        callback: MaybeCallback = None,
-        log_interval: int = 4,  # episodes, as SB3's off-policy algorithms (TD3, SAC, DDPG): the zoo's default output
-        tb_log_name: str = "DENFAC",
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> SelfDENFAC:
-        return super().learn(
-            total_timesteps=total_timesteps,
-            callback=callback,
-            log_interval=log_interval,
-            tb_log_name=tb_log_name,
-            reset_num_timesteps=reset_num_timesteps,
-            progress_bar=progress_bar,
-        )
-
     def _excluded_save_params(self) -> list[str]:
         # gradient_steps: always -1 (_setup_model); a saved -1 would make sb3-denfac <= 0.4.0 update once per step
         return [*super()._excluded_save_params(), "actor", "critic", "last_update", "last_updates", "gradient_steps"]

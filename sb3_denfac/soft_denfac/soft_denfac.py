@@ -7,7 +7,6 @@ from typing import Any, ClassVar
 import numpy as np
 import torch as th
 from stable_baselines3.common.buffers import ReplayBuffer
-from stable_baselines3.common.noise import ActionNoise
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule
 from stable_baselines3.common.utils import update_learning_rate
@@ -173,22 +172,17 @@ class SoftDENFAC(DENFAC):
             update_learning_rate(self.policy.ent_coef_optimizer, rates["actor"])
         return rates
 
-    def _sample_action(
-        self, learning_starts: int, action_noise: ActionNoise | None = None, n_envs: int = 1
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """a ~ pi(.|s) (after the uniform warm-up of ``learning_starts``); D's behaviour mean is the actor's
-        deterministic action tanh(m(s)), from the same forward pass."""
-        if action_noise is not None or self.num_timesteps < learning_starts:
-            return super()._sample_action(learning_starts, action_noise, n_envs)
+    def _explore(self, observation: Any) -> tuple[np.ndarray, np.ndarray]:
+        """a ~ pi(.|s), SAC's squashed Gaussian; D's behaviour mean is the actor's deterministic action tanh(m(s)),
+        from the same forward pass."""
         self.policy.set_training_mode(False)
-        obs, _ = self.policy.obs_to_tensor(self._last_obs)
+        obs, _ = self.policy.obs_to_tensor(observation)
         with th.no_grad():
             mean, log_std, _ = self.actor.get_action_dist_params(obs)
             sampled = self.actor.action_dist.actions_from_params(mean, log_std)
         shape = (-1, *self.action_space.shape)  # the actor's (n_envs, dim(A)) as the action space's shape
-        buffer_action = sampled.cpu().numpy().reshape(shape).astype(np.float32)
-        self._last_behaviour_mean = th.tanh(mean).cpu().numpy().reshape(shape).astype(np.float32)
-        return self.policy.unscale_action(buffer_action), buffer_action
+        actions, means = (x.cpu().numpy().reshape(shape).astype(np.float32) for x in (sampled, th.tanh(mean)))
+        return actions, means
 
     def _bootstrap_value(
         self, updater: Updater, next_obs: th.Tensor, bounds: tuple[float, float] | None
@@ -206,9 +200,6 @@ class SoftDENFAC(DENFAC):
         assert isinstance(updater, SoftActorFit)
         self.logger.record("train/ent_coef", self.policy.entropy_coefficient().item())
         self.logger.record("train/ent_coef_loss", updater.ent_coef_loss.item())
-
-    def learn(self, *args: Any, tb_log_name: str = "SoftDENFAC", **kwargs: Any) -> SoftDENFAC:  # type: ignore[override]
-        return super().learn(*args, tb_log_name=tb_log_name, **kwargs)  # type: ignore[return-value]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         state_dicts, variables = super()._get_torch_save_params()
