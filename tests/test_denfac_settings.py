@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import ast
 import inspect
+import re
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
 
+import sb3_denfac
 from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.denfac import settings as settings_module
 from sb3_denfac.denfac.settings import SETTINGS
 
 #: Constructor arguments that are SB3's plumbing, not settings of the algorithm (checked by SB3 or where they are used).
@@ -91,3 +96,56 @@ def test_adam_settings_live_in_optimizer_kwargs():
         assert all(net.optimizer.param_groups[0]["betas"] == betas for net in (model.actor, model.critic))
     old = DENFAC.load(Path(__file__).parent / "data" / "denfac_v0.1_pendulum.zip", device="cpu")  # saved adam_betas
     assert old.actor.optimizer.param_groups[0]["betas"] == (0.0, 0.999) and "adam_betas" not in vars(old)
+
+
+def _imports(module: str, seen: set[str]) -> set[str]:
+    """The package's modules that ``module``'s import statements reach, transitively (packages' ``__init__`` left
+    out: ``sb3_denfac.denfac``'s imports the whole algorithm)."""
+    path = Path(sb3_denfac.__file__).parent.joinpath(*module.split(".")[1:]).with_suffix(".py")
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
+        names += [alias.name for alias in node.names] if isinstance(node, ast.Import) else []
+        for name in names:
+            if (
+                name.startswith("sb3_denfac.")
+                and name not in seen
+                and Path(sb3_denfac.__file__).parent.joinpath(*name.split(".")[1:]).with_suffix(".py").exists()
+            ):
+                seen.add(name)
+                _imports(name, seen)
+    return seen
+
+
+def test_settings_module_does_not_import_the_update_kernels():
+    """Checking a setting needs no updater: ``settings`` reaches neither ``update_paths`` nor the kernels."""
+    reached = _imports("sb3_denfac.denfac.settings", set())
+    kernels = {f"sb3_denfac.denfac.{name}" for name in ("update_paths", "fast", "eager_steps", "updaters")}
+    assert not reached & kernels, sorted(reached)
+    assert "sb3_denfac.denfac.options" in reached  # the walk follows the imports
+
+
+def test_every_setting_is_stored_by_one_explicit_assignment():
+    """A reader follows a setting from the signature to one line of settings.py (``m.<name> = check...``)."""
+    source = inspect.getsource(settings_module.store_settings)
+    stored = set(re.findall(r"\bm\.(\w+)\b(?=[\w., m]*=)", source))
+    assert set(SETTINGS) - {"learning_rate", "buffer_size", "batch_size", "gamma", "prioritized"} <= stored
+    for name in SETTINGS:
+        if name not in ("learning_rate", "buffer_size", "batch_size", "gamma"):
+            assert hasattr(DENFAC("MlpPolicy", gym.make("Pendulum-v1")), name)
+            break
+
+
+def test_soft_denfac_names_its_own_arguments_and_forwards_denfacs():
+    """SoftDENFAC's signature is DENFAC's without the deterministic actor's settings it pins, plus its own; a pinned
+    setting is refused by name with the reason, an unknown one with Python's TypeError naming SoftDENFAC."""
+    denfac, soft = (set(inspect.signature(c.__init__).parameters) for c in (DENFAC, SoftDENFAC))
+    assert soft == (denfac - set(SoftDENFAC.PINNED)) | {"ent_coef", "target_entropy"}
+    assert inspect.signature(SoftDENFAC.__init__).parameters["bootstrap_bounds"].default is True  # its own default
+    env = gym.make("Pendulum-v1")
+    for name, value in (("sigma", 0.1), ("weighting", "retrace"), ("frozen_targets", False)):
+        with pytest.raises(TypeError, match=f"^SoftDENFAC does not take {name}: "):
+            SoftDENFAC("MlpPolicy", env, **{name: value})
+    with pytest.raises(TypeError, match=r"SoftDENFAC.__init__\(\) got an unexpected keyword argument 'critic_step'"):
+        SoftDENFAC("MlpPolicy", env, critic_step=3)
+    model = SoftDENFAC("MlpPolicy", env, critic_steps=3, gamma=0.9, reset_every=500)
+    assert (model.critic_steps, model.gamma, model.reset_every, model.weighting) == (3, 0.9, 500, "none")

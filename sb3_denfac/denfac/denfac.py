@@ -25,7 +25,7 @@ from sb3_denfac.denfac.buffers import BehaviourMeansBuffer, DENFACReplayBufferSa
 from sb3_denfac.denfac.her import replay_buffer_class_for
 from sb3_denfac.denfac.options import FittedIterations, bootstrap_range, clip_bootstrap, fitted_iterations
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
-from sb3_denfac.denfac.settings import SETTINGS, check_settings, warn_ignored_settings
+from sb3_denfac.denfac.settings import store_settings, warn_ignored_settings
 from sb3_denfac.denfac.update_paths import DENFAC_UPDATERS, UpdaterClasses, check_update_path, make_updater
 from sb3_denfac.denfac.updaters import FitResult, FitSettings, Updater, UpdateStats
 
@@ -179,10 +179,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
-        arguments = locals()
-        settings = check_settings({name: arguments[name] for name in SETTINGS})  # every setting, one place
-        learning_rate = settings.pop("learning_rate")
-        self.__dict__.update(settings)  # DENFAC's own settings, as attributes of their names
+        learning_rate = store_settings(self, locals())  # every setting checked and stored, one place (settings.py)
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(

@@ -16,7 +16,6 @@ from sb3_denfac.denfac.fast import FastUpdater, supported_networks
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
 
 #: DENFAC's ``update_path`` values: the fast updater where it applies, the fast one (or an error), the autograd one.
-UPDATE_PATHS = ("auto", "fast", "plain")
 
 
 class UpdaterClasses(NamedTuple):

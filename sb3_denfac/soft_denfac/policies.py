@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-import math
-import numbers
 from typing import Any
 
-import numpy as np
 import torch as th
-from gymnasium import spaces
-from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs
 from stable_baselines3.sac.policies import Actor as SACActor
@@ -17,6 +12,7 @@ from torch import nn
 
 from sb3_denfac.common.networks import reset_parameters_
 from sb3_denfac.denfac.policies import DENFACBasePolicy
+from sb3_denfac.denfac.settings import check_target_entropy, parse_ent_coef
 
 
 class SoftDENFACActor(SACActor):
@@ -99,32 +95,6 @@ class SoftDENFACPolicy(DENFACBasePolicy):
         """Re-initialise the actor from PyTorch's initialisation (SAC's) and forget its Adam state."""
         reset_parameters_(self.actor, "default")
         self.actor.optimizer.state.clear()
-
-
-def parse_ent_coef(ent_coef: str | float) -> tuple[float, bool]:
-    """(initial alpha, tuned) of SB3 SAC's ``ent_coef``: "auto" (1, tuned), "auto_<x>" (x, tuned), a float (fixed)."""
-    tuned = isinstance(ent_coef, str) and (ent_coef == "auto" or ent_coef.startswith("auto_"))
-    value = ("1.0" if ent_coef == "auto" else ent_coef[len("auto_") :]) if tuned else ent_coef  # type: ignore[index]
-    try:
-        initial = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        initial = float("nan")
-    if isinstance(ent_coef, bool) or not 0 < initial < float("inf"):
-        raise ValueError(
-            'ent_coef must be "auto", "auto_<initial value>" or a positive float (SAC\'s entropy coefficient alpha), '
-            f"got {ent_coef!r}"
-        )
-    return initial, tuned
-
-
-def check_target_entropy(target_entropy: str | float, action_space: spaces.Space) -> float:
-    """The target entropy of the tuned alpha: "auto" is -dim(A) (SAC's), else a float."""
-    if isinstance(target_entropy, str) and target_entropy == "auto":
-        return -float(get_action_dim(action_space))
-    is_real = isinstance(target_entropy, numbers.Real) and not isinstance(target_entropy, (bool, np.bool_))
-    if not is_real or not math.isfinite(float(target_entropy)):  # type: ignore[arg-type]
-        raise ValueError(f'target_entropy must be "auto" (-dim(A)) or a finite float, got {target_entropy!r}')
-    return float(target_entropy)  # type: ignore[arg-type]
 
 
 class MultiInputPolicy(SoftDENFACPolicy):

@@ -6,19 +6,19 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.type_aliases import GymEnv
 from stable_baselines3.common.utils import update_learning_rate
 
-from sb3_denfac.common.docstrings import with_parent_params
+from sb3_denfac.common.docstrings import check_forwarded, with_parent_params
 from sb3_denfac.common.model_files import stored_values
 from sb3_denfac.denfac.denfac import DENFAC
-from sb3_denfac.denfac.options import FittedIterations, clip_bootstrap
+from sb3_denfac.denfac.options import clip_bootstrap
 from sb3_denfac.denfac.policies import DENFACPolicy
+from sb3_denfac.denfac.settings import check_soft_settings
 from sb3_denfac.denfac.update_paths import UpdaterClasses
 from sb3_denfac.denfac.updaters import Updater
-from sb3_denfac.soft_denfac.policies import MlpPolicy, MultiInputPolicy, SoftDENFACPolicy, check_target_entropy, parse_ent_coef
+from sb3_denfac.soft_denfac.policies import MlpPolicy, MultiInputPolicy, SoftDENFACPolicy
 from sb3_denfac.soft_denfac.updaters import SOFT_UPDATERS, SoftActorFit
 
 
@@ -59,93 +59,44 @@ class SoftDENFAC(DENFAC):
     updater_classes: ClassVar[UpdaterClasses] = SOFT_UPDATERS
     policy: SoftDENFACPolicy
 
+    #: DENFAC's settings of its deterministic actor that SoftDENFAC pins, and why
+    PINNED: ClassVar[dict[str, str]] = {
+        "sigma": "SAC's actor samples from its own Gaussian (DENFAC's truncated Gaussian's sigma)",
+        "weighting": "no importance weights of a behaviour density: c = 1",
+        "inverting_gradients": "tanh bounds the actions",
+        "actor_proximal": "SAC's actor objective has no proximal term",
+        "target_policy_noise": "the next actions of the targets are sampled from pi",
+        "target_noise_clip": "the next actions of the targets are sampled from pi",
+        "frozen_targets": "the soft targets are computed once per fitted iteration, as eq. (4)'s",
+    }
+    #: the values SoftDENFAC gives them
+    _PINNED_VALUES: ClassVar[dict[str, Any]] = dict(
+        inverting_gradients=False, weighting="none", actor_proximal=0.0, target_policy_noise=0.0
+    )
+
     def __init__(
         self,
         policy: str | type[SoftDENFACPolicy],
         env: GymEnv | str,
-        learning_rate: float | Schedule = 1e-3,
-        actor_learning_rate: float | Schedule | None = None,
-        critic_learning_rate: float | Schedule | None = None,
-        buffer_size: int = 100_000,
-        learning_starts: int = 0,
-        batch_size: int | None = 256,
-        gamma: float = 0.99,
-        n_fitted_iterations: FittedIterations = 10,
-        critic_steps: int = 50,
-        actor_steps: int = 25,
-        reset_critic: bool = False,
-        reset_actor: bool = False,
-        max_grad_norm: float | None = 10.0,
-        bootstrap_on_timeout: bool = True,
-        update_path: str = "auto",
-        prioritized: str | dict[str, Any] = "none",
-        update_to_data_ratio: float | None = None,
-        critic_target: str = "mean",
+        *,
         bootstrap_bounds: bool = True,
+        prioritized: str | dict[str, Any] = "none",
         ent_coef: str | float = "auto",
         target_entropy: str | float = "auto",
-        async_update: bool = False,
-        reset_every: int | None = None,
-        replay_buffer_class: type[ReplayBuffer] | None = None,
-        replay_buffer_kwargs: dict[str, Any] | None = None,
-        stats_window_size: int = 100,
-        tensorboard_log: str | None = None,
         policy_kwargs: dict[str, Any] | None = None,
-        verbose: int = 0,
-        seed: int | None = None,
-        device: th.device | str = "auto",
-        torch_threads: int | None = 1,
-        _init_setup_model: bool = True,
+        **kwargs: Any,
     ):
-        parse_ent_coef(ent_coef)  # a ValueError naming the accepted values
-        if not (isinstance(target_entropy, str) and target_entropy == "auto"):
-            check_target_entropy(target_entropy, None)  # type: ignore[arg-type]  # a float: no space needed
-        if (prioritized.get("on") if isinstance(prioritized, dict) else prioritized) == "both":
-            raise ValueError(
-                "prioritized='both' draws the actor's mini-batches by TD error, which SoftDENFAC's actor steps do not "
-                "implement: use prioritized='critic'"
-            )
+        check_forwarded(type(self), kwargs, self.PINNED)
+        check_soft_settings(ent_coef, target_entropy, prioritized)
         self.ent_coef, self.target_entropy = ent_coef, target_entropy
         super().__init__(
             policy,
             env,
-            learning_rate=learning_rate,
-            actor_learning_rate=actor_learning_rate,
-            critic_learning_rate=critic_learning_rate,
-            buffer_size=buffer_size,
-            learning_starts=learning_starts,
-            batch_size=batch_size,
-            gamma=gamma,
-            n_fitted_iterations=n_fitted_iterations,
-            critic_steps=critic_steps,
-            actor_steps=actor_steps,
-            reset_critic=reset_critic,
-            reset_actor=reset_actor,
-            # the deterministic actor's settings, pinned: no behaviour-density weights (c = 1), no inverting gradients
-            # (tanh bounds the actions), no proximal term, no target smoothing (the next actions are sampled)
-            inverting_gradients=False,
-            weighting="none",
-            actor_proximal=0.0,
-            target_policy_noise=0.0,
-            max_grad_norm=max_grad_norm,
-            bootstrap_on_timeout=bootstrap_on_timeout,
-            update_path=update_path,
-            prioritized=prioritized,
-            update_to_data_ratio=update_to_data_ratio,
-            critic_target=critic_target,
             bootstrap_bounds=bootstrap_bounds,
-            async_update=async_update,
-            reset_every=reset_every,
-            replay_buffer_class=replay_buffer_class,
-            replay_buffer_kwargs=replay_buffer_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
+            prioritized=prioritized,
             policy_kwargs=policy_kwargs,
-            verbose=verbose,
-            seed=seed,
-            device=device,
-            torch_threads=torch_threads,
-            _init_setup_model=_init_setup_model,
+            **self._PINNED_VALUES,
+            **kwargs,
         )
 
     @classmethod
