@@ -47,6 +47,7 @@ class BNContinuousCritic(ContinuousCritic):
     :param batch_norm: batch norm before every linear layer except the last (paper)
     :param init: "paper" or "default" initialisation
     :param bn_momentum: momentum of the batch-norm running statistics
+
     (the other arguments as in :class:`BNActor`)
     """
 
