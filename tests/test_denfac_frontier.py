@@ -217,10 +217,33 @@ def test_soft_denfac_takes_the_critic_options():
     assert model.critic.target_subset == 2 and th.isfinite(model.last_update.q_targets).all()
 
 
-def test_soft_denfac_takes_periodic_resets_and_not_the_joint_bootstrap():
+def test_soft_denfac_takes_periodic_resets_and_the_joint_bootstrap():
     env = gym.make("Pendulum-v1", max_episode_steps=50)
     model = SoftDENFAC("MlpPolicy", env, seed=0, reset_every=100, **SMALL)
     model.learn(150)
     assert model._resets_done == 1 and model.frozen_targets
-    with pytest.raises(TypeError, match="frozen_targets"):
-        SoftDENFAC("MlpPolicy", env, frozen_targets=False)
+    crossq = SoftDENFAC("MlpPolicy", env, seed=0, frozen_targets=False, **{**SMALL, "policy_kwargs": dict(batch_renorm=True)})
+    crossq.learn(100)
+    assert not crossq.frozen_targets and th.isfinite(crossq.last_update.q_targets).all()
+
+
+def test_joint_bootstrap_subtracts_the_penalty_at_the_next_actions():
+    """q = r + g (Q(s', a') - p) is the target of the rewards r - g p without a penalty: the soft value's entropy term
+    enters every joint critic step (SoftDENFAC's frozen_targets=False)."""
+    states = []
+    for shifted in (False, True):
+        model = filled(make(critic_steps=3, target_policy_noise=0.0, learning_rate=0.05, frozen_targets=False))
+        th.manual_seed(1)
+        updater = model.make_updater()
+        data = model.replay_buffer.all_samples()
+        n = n_rows(data.rewards)
+        next_actions = model.actor(data.next_observations).detach().clamp(-1, 1)
+        discounts = model.gamma * (1.0 - data.dones)
+        penalty = th.linspace(-1.0, 1.0, n).unsqueeze(1)
+        rewards = data.rewards - discounts * penalty if shifted else data.rewards
+        batches = th.randint(n, (model.critic_steps, 32))
+        o, a, o2, w = data.observations, data.actions, data.next_observations, th.ones(n, 1)
+        updater.fit_critic_joint(o, a, o2, next_actions, rewards, discounts, w, batches, None, None if shifted else penalty)
+        states.append({k: v.clone() for k, v in model.critic.state_dict().items()})
+    for key, value in states[0].items():  # rtol 1e-4, atol 1e-5: r + g (Q - p) and (r - g p) + g Q round differently
+        th.testing.assert_close(states[1][key], value, rtol=1e-4, atol=1e-5, msg=key)

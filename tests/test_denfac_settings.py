@@ -142,7 +142,7 @@ def test_soft_denfac_names_its_own_arguments_and_forwards_denfacs():
     assert soft == (denfac - set(SoftDENFAC.PINNED)) | {"ent_coef", "target_entropy"}
     assert inspect.signature(SoftDENFAC.__init__).parameters["bootstrap_bounds"].default is True  # its own default
     env = gym.make("Pendulum-v1")
-    for name, value in (("sigma", 0.1), ("weighting", "retrace"), ("frozen_targets", False)):
+    for name, value in (("sigma", 0.1), ("weighting", "retrace"), ("target_noise_clip", 0.3)):
         with pytest.raises(TypeError, match=f"^SoftDENFAC does not take {name}: "):
             SoftDENFAC("MlpPolicy", env, **{name: value})
     with pytest.raises(TypeError, match=r"SoftDENFAC.__init__\(\) got an unexpected keyword argument 'critic_step'"):

@@ -77,7 +77,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; or a dict ``on`` (one of those),
-        ``alpha`` in p_i = (|delta_i| + eps)^alpha (0.6), ``beta`` in w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0.4),
+        ``alpha`` in p_i = (abs(delta_i) + eps)^alpha (0.6), ``beta`` in w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0.4),
         ``eps`` (1e-3); needs an int ``batch_size``
     :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
         ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
@@ -306,11 +306,12 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
             with th.no_grad():
                 discounts = self.gamma * (1.0 - done)
-                if self.frozen_targets:
-                    next_q, clipped = self._bootstrap_value(updater, o2, bounds)
-                else:  # CrossQ: one draw of the next actions, read by q_k (logged) and by every joint critic step
-                    next_actions = self._target_actions(updater, o2)
-                    next_q, clipped = clip_bootstrap(updater.critic(o2, next_actions), bounds)
+                # a' of eq. (4) (one draw per iteration, read by q_k and, with frozen_targets=False, by every joint
+                # critic step, CrossQ's) and what the bootstrap value subtracts at it (SoftDENFAC: alpha log pi)
+                next_actions, penalty = self._next_actions(updater, o2)
+                next_q, clipped = clip_bootstrap(updater.critic(o2, next_actions), bounds)
+                if penalty is not None:
+                    next_q = next_q - penalty
                 q_targets = r + discounts * next_q
                 weights = self._importance_weights(updater, o, o2, a, lp_b)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
@@ -320,7 +321,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             if self.frozen_targets:
                 critic_loss = updater.fit_critic(o, a, q_targets, weights, batches)
             else:  # CrossQ: each step bootstraps from the critic it fits, at the iteration's next actions
-                critic_loss = updater.fit_critic_joint(o, a, o2, next_actions, r, discounts, weights, batches, bounds)
+                critic_loss = updater.fit_critic_joint(o, a, o2, next_actions, r, discounts, weights, batches, bounds, penalty)
             if self.reset_actor:
                 updater.reset_actor()
             if sample is None or sample.actor_rows is None:
@@ -360,12 +361,10 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         self.logger.record("train/importance_weight_min", weights.min().item())
         self.logger.record("train/fitted_iterations", stats.fitted_iterations)
 
-    def _bootstrap_value(
-        self, updater: Updater, next_obs: th.Tensor, bounds: tuple[float, float] | None
-    ) -> tuple[th.Tensor, th.Tensor]:
-        """Q_{k-1}(s', a') of eq. (4) at the next actions a' of :meth:`_target_actions`, clipped to ``bounds``
-        (``bootstrap_bounds``), and the fraction clipped."""
-        return clip_bootstrap(updater.critic(next_obs, self._target_actions(updater, next_obs)), bounds)
+    def _next_actions(self, updater: Updater, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor | None]:
+        """The next actions a' of eq. (4)'s targets (:meth:`_target_actions`), and what the bootstrap value subtracts at
+        them: nothing here (SoftDENFAC: alpha log pi(a'|s'))."""
+        return self._target_actions(updater, next_obs), None
 
     def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> th.Tensor:
         """The next actions of eq. (4)'s targets: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise

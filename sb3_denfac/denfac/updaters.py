@@ -12,7 +12,7 @@
   targets are computed on the rows they read only (None: full batch, or prioritised sampling);
 - ``fit_critic(s, a, q, c, batches)``: ``critic_steps`` Adam steps on 1/N sum c_t (Q(s_t, a_t) - q_t)^2 (eq. 4), for
   each Q network, on the same mini-batches (``batches``, or drawn by the updater);
-- ``fit_critic_joint(s, a, s', a', r, g, c, batches, bounds)``: with ``frozen_targets=False``, the same steps, each
+- ``fit_critic_joint(s, a, s', a', r, g, c, batches, bounds, p)``: with ``frozen_targets=False``, the same steps, each
   bootstrapping from the critic it fits: q = r + g clip(Q(s', a')) from one train-mode forward pass of (s, a) and
   (s', a') together, detached (CrossQ); the autograd updater only;
 - ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
@@ -210,10 +210,11 @@ class Updater(ABC):
         weights: th.Tensor,
         batches: th.Tensor | None,
         bounds: tuple[float, float] | None,
+        next_penalty: th.Tensor | None = None,
     ) -> th.Tensor:
-        """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2 with q = r + g clip(Q(s', a')) recomputed at every
-        step by the critic being fitted (``frozen_targets=False``), ``discounts`` g = gamma (1 - d); returns the last
-        step's loss."""
+        """``critic_steps`` Adam steps on 1/N sum c (Q(s, a) - q)^2 with q = r + g (clip(Q(s', a')) - p) recomputed at
+        every step by the critic being fitted (``frozen_targets=False``), ``discounts`` g = gamma (1 - d), p the
+        ``next_penalty`` at a' (SoftDENFAC's alpha log pi(a'|s'); None: 0); returns the last step's loss."""
         raise NotImplementedError(f"{type(self).__name__} does not implement frozen_targets=False")
 
     @abstractmethod
@@ -303,6 +304,7 @@ class AutogradUpdater(Updater):
         weights: th.Tensor,
         batches: th.Tensor | None,
         bounds: tuple[float, float] | None,
+        next_penalty: th.Tensor | None = None,
     ) -> th.Tensor:
         critic = self.policy.critic
 
@@ -315,6 +317,8 @@ class AutogradUpdater(Updater):
             values = critic.all_q(stack_rows(o, o2), th.cat([a, a2]))
             with th.no_grad():
                 next_q, _ = clip_bootstrap(critic.combine([v[n:] for v in values], self.settings.critic_target), bounds)
+                if next_penalty is not None:
+                    next_q = next_q - take(next_penalty, idx)
                 q = r + g * next_q
             return [(c * (v[:n] - q).pow(2)).mean() for v in values]
 

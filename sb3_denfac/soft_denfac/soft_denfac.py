@@ -13,7 +13,6 @@ from stable_baselines3.common.utils import update_learning_rate
 from sb3_denfac.common.docstrings import check_forwarded, with_parent_params
 from sb3_denfac.common.model_files import stored_values
 from sb3_denfac.denfac.denfac import DENFAC
-from sb3_denfac.denfac.options import clip_bootstrap
 from sb3_denfac.denfac.policies import DENFACPolicy
 from sb3_denfac.denfac.settings import check_soft_settings
 from sb3_denfac.denfac.update_paths import UpdaterClasses
@@ -30,14 +29,14 @@ class SoftDENFAC(DENFAC):
     - The actor is a squashed Gaussian pi(a|s) (:class:`~.policies.SoftDENFACActor`), played as sampled.
     - At every fitted iteration, after the critic's fit on eq. (4), G steps of SAC's actor objective,
       alpha log pi(a|s) - min_j Q_j(s, a) (eq. 7), each followed by a step of the tuned alpha (eq. 18).
-    - The targets of eq. (4) are soft: r + gamma (Q_{k-1}(s', a') - alpha log pi_{k-1}(a'|s')), a' ~ pi_{k-1}(.|s')
+    - The targets of eq. (4) are soft: r + gamma (Q_{k-1}(s', a') - alpha log pi_{k-1}(a' | s')), a' ~ pi_{k-1}(.|s')
       (eq. 3), drawn anew at every fitted iteration.
 
     What belongs to DENFAC's deterministic actor is not an argument here: the truncated Gaussian's ``sigma``, the
     importance ``weighting`` of its behaviour density, ``inverting_gradients`` (tanh bounds the actions), the proximal
-    term and TD3's target smoothing; nor is ``frozen_targets`` (the soft targets are computed once per fitted
-    iteration, as eq. (4)'s). Why a soft actor inside DENFAC and where it stands against the deterministic one:
-    docs/algorithms.md.
+    term and TD3's target smoothing (:attr:`PINNED`: each refused by name). ``frozen_targets=False`` (CrossQ's joint
+    bootstrap) takes the soft value: every critic step reads Q(s', a') - alpha log pi(a' | s') at the iteration's
+    sampled a'. Why a soft actor inside DENFAC and where it stands against the deterministic one: docs/algorithms.md.
 
     :param ent_coef: alpha, SB3 SAC's ``ent_coef``: "auto" (default; tuned towards ``target_entropy``, from 1),
         "auto_<x>" (tuned, from x) or a float (fixed)
@@ -67,7 +66,6 @@ class SoftDENFAC(DENFAC):
         "actor_proximal": "SAC's actor objective has no proximal term",
         "target_policy_noise": "the next actions of the targets are sampled from pi",
         "target_noise_clip": "the next actions of the targets are sampled from pi",
-        "frozen_targets": "the soft targets are computed once per fitted iteration, as eq. (4)'s",
     }
     #: the values SoftDENFAC gives them
     _PINNED_VALUES: ClassVar[dict[str, Any]] = dict(
@@ -135,15 +133,12 @@ class SoftDENFAC(DENFAC):
         actions, means = (x.cpu().numpy().reshape(shape).astype(np.float32) for x in (sampled, th.tanh(mean)))
         return actions, means
 
-    def _bootstrap_value(
-        self, updater: Updater, next_obs: th.Tensor, bounds: tuple[float, float] | None
-    ) -> tuple[th.Tensor, th.Tensor]:
-        """SAC's soft value of eq. (4)'s next state, Q_{k-1}(s', a') - alpha log pi_{k-1}(a'|s') with a' sampled, the
-        Q term clipped to ``bounds``; and the fraction clipped."""
+    def _next_actions(self, updater: Updater, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        """a' ~ pi_{k-1}(.|s') and alpha log pi_{k-1}(a' | s'): SAC's soft value of eq. (4)'s next state is
+        Q_{k-1}(s', a') - alpha log pi_{k-1}(a' | s'), the Q term clipped to the bootstrap bounds."""
         assert isinstance(updater, SoftActorFit)
         actions, log_prob = updater.sample_actor(next_obs)
-        next_q, clipped = clip_bootstrap(updater.critic(next_obs, actions), bounds)
-        return next_q - updater.policy.entropy_coefficient() * log_prob, clipped  # the fitted copy's alpha
+        return actions, updater.policy.entropy_coefficient() * log_prob  # the fitted copy's alpha
 
     def _record_update(self, updater: Updater, *args: Any) -> None:
         """DENFAC's keys, and SB3 SAC's ``train/ent_coef`` and ``train/ent_coef_loss``."""
