@@ -32,6 +32,7 @@ from sb3_denfac.common.threads import torch_threads
 from sb3_denfac.envs import ALL_ENV_IDS, PAPER_PERFORMANCE_KEY
 from sb3_denfac.envs.facts import env_facts
 from sb3_denfac.zoo import config as zoo_config
+from sb3_denfac.zoo.validation import load_hyperparams
 
 
 def plot_learning_curve(
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> dict:
     try:  # before anything is written
         zoo_config.register()
         zoo_config.check_env_id(args.env)
-        hyperparams = zoo_config.load_hyperparams(args.algo, args.env)  # the package's zoo YAML (the paper's Figure 5 values)
+        hyperparams = load_hyperparams(args.algo, args.env)  # the package's zoo YAML (the paper's Figure 5 values)
     except zoo_config.ZooConfigError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")
     if args.threads < 1:

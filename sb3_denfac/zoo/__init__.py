@@ -1,5 +1,5 @@
 """RL Zoo glue: the ``sb3-denfac-zoo`` command line (:mod:`.cli`), the YAML files and models built from their entries
-(:mod:`.config`), and the Optuna samplers (:mod:`.samplers`).
+(:mod:`.config`, checked by :mod:`.validation`), and the Optuna samplers (:mod:`.samplers`).
 
 The names below are this package's public interface (the benchmarks and the quickstart use ``make_model``,
 ``load_config_file``, ``select_entry``, ``load_hyperparams`` and ``algorithm_class``).
@@ -16,7 +16,7 @@ from sb3_denfac.zoo.usage import main
 #: rl_zoo3 nor Optuna nor torch).
 _LAZY: dict[str, str] = {
     **dict.fromkeys(
-        ["DEFAULT_ALGO", "DEFAULT_ENV", "DEFAULT_NUM_THREADS", "CheckedExperimentManager", "prepare_train_args"],
+        ["DEFAULT_ALGO", "DEFAULT_ENV", "DEFAULT_NUM_THREADS", "prepare_train_args"],
         "sb3_denfac.zoo.cli",
     ),
     **dict.fromkeys(
@@ -31,15 +31,14 @@ _LAZY: dict[str, str] = {
             "default_config_path",
             "expand_preset",
             "load_config_file",
-            "load_hyperparams",
             "make_model",
             "register",
             "select_entry",
-            "validate_config_file",
-            "validate_entry",
         ],
         "sb3_denfac.zoo.config",
     ),
+    "CheckedExperimentManager": "sb3_denfac.zoo.experiment",
+    **dict.fromkeys(["load_hyperparams", "validate_config_file", "validate_entry"], "sb3_denfac.zoo.validation"),
 }
 
 
