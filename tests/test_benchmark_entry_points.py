@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -10,20 +12,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from benchmarks import (
-    ablation_analysis,
-    acrobot_horizon,
-    analysis,
-    cost,
-    diagnostics,
-    stats,
-    store,
-    throughput,
-    update_cost,
-    update_cost_critics,
-    update_threads,
-)
 from benchmarks import run as runner
+from benchmarks.reports import ablation_analysis, analysis, stats
+from benchmarks.runner import diagnostics, store
+from benchmarks.runner import sweep as sweeps
+from benchmarks.studies import acrobot_horizon, cost, throughput, update_cost, update_cost_critics, update_threads
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -49,6 +42,41 @@ def test_run_and_analysis_command_lines(tmp_path, monkeypatch):
     assert "DENFAC (default)" in (tmp_path / "all_runs.md").read_text()
 
 
+def test_a_run_of_one_suite_writes_its_report_alone_and_prints_no_table(tmp_path, monkeypatch, capsys):
+    """The cell (DENFAC's default, Pendulum, seed 0) is in ``figure3``, ``generalisation`` and ``matched``: a run of
+    ``generalisation`` writes ``generalisation.md`` and no other suite's report, and the console gets a line per cell
+    and the summary, no markdown; ``python -m benchmarks.reports.analysis`` then writes every report."""
+    monkeypatch.setattr(stats, "REPS", 50)
+    args = ["--suite", "generalisation", "--algos", "denfac_default", "--envs", "pendulum", "--seeds", "0"]
+    assert runner.main([*args, "--episodes", "2", "--results", str(tmp_path), "--workers", "0"]) == 0
+    reports = sorted(p.name for p in tmp_path.glob("*.md"))
+    assert reports == ["generalisation.md"] and "DENFAC (default)" in (tmp_path / "generalisation.md").read_text()
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 4 and not [line for line in lines if line.startswith(("|", "#", "!["))], lines
+    assert "[1/1] done denfac_default pendulum seed 0" in lines[1]
+    assert lines[2:] == [f"report: {tmp_path / 'generalisation.md'}", "finished: 1 done, 0 skipped, 0 failed"]
+    analysis.main(["--results", str(tmp_path)])
+    assert {"figure3.md", "matched.md", "all_runs.md"} <= {p.name for p in tmp_path.glob("*.md")}
+    assert capsys.readouterr().out.count("\n") == 1  # the files written, not their tables
+
+
+DOCUMENTS = ["README.md", "benchmarks/README.md", *(f"docs/{p.name}" for p in sorted((REPO / "docs").glob("*.md")))]
+DOCUMENTS += [str(p.relative_to(REPO)) for p in sorted((REPO / "research").glob("*/README.md"))]
+
+
+@pytest.mark.parametrize("document", DOCUMENTS)
+def test_every_benchmark_command_quoted_in_the_docs_names_a_module(document):
+    """``python -m benchmarks...`` and ``python -m research...`` in the README, docs/, benchmarks/ and research/'s
+    READMEs name modules that exist (a module moved without its commands fails here)."""
+    text = (REPO / document).read_text()
+    for module in sorted(set(re.findall(r"python -m ((?:benchmarks|research)(?:\.\w+)*)", text))):
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:  # a package above it is missing
+            found = False
+        assert found, f"{document} quotes python -m {module}, which is no module"
+
+
 def test_ablation_study_records_diagnostics_and_tables(tmp_path):
     args = ["--suite", "ablation", "--algos", "abl:default", "abl:faithful", "--envs", "pendulum", "--seeds", "0"]
     assert runner.main([*args, "--episodes", "6", "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
@@ -71,7 +99,7 @@ def test_diagnostics_outside_a_suite(tmp_path):
     assert [d["episode"] for d in record["diagnostics"]] == [2] and record["diagnostics"][0]["n"] == 2 * 200
     assert all(0.0 <= record["diagnostics"][0][key] <= 1.0 for key in ("grad_sign_agreement", "grad_sign_agreement_data"))
     with pytest.raises(ValueError, match="diagnostics_every must be an int >= 0"):
-        runner.sweep(["abl:default05"], ["Pendulum-v1"], [1], 1, results_dir=tmp_path, diagnostics_every=-1)
+        sweeps.sweep(["abl:default05"], ["Pendulum-v1"], [1], 1, results_dir=tmp_path, diagnostics_every=-1)
 
 
 def test_action_gradient_sign_agreement_of_two_critics():
@@ -208,7 +236,16 @@ def test_frontier_critics_study_scripts(tmp_path, capsys):
     assert "rho2 (suite)" in set(table["row"]) and set(table["env"]) <= {"Hopper-v5", "Walker2d-v5"}
 
 
-@pytest.mark.parametrize("module", ["benchmarks.rows", "benchmarks.suites", "benchmarks.hyperparams", "benchmarks.run"])
+@pytest.mark.parametrize(
+    "module",
+    [
+        "benchmarks.rows",
+        "benchmarks.runner.rows",
+        "benchmarks.runner.suites",
+        "benchmarks.runner.hyperparams",
+        "benchmarks.run",
+    ],
+)
 def test_benchmark_modules_import_first_in_a_fresh_interpreter(module):
     """No import circle: each module imports on its own (the ablation's rows are data that ``suites`` reads)."""
     result = subprocess.run([sys.executable, "-c", f"import {module}"], cwd=REPO, capture_output=True, text=True, timeout=120)
@@ -291,11 +328,11 @@ def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_
 
 def test_step_budget_suite_refuses_an_episode_budget(tmp_path):
     with pytest.raises(ValueError, match="100000 env steps, not episodes"):
-        runner.sweep(suite="mujoco100k", episodes=3, envs=["Hopper-v5"], results_dir=tmp_path, verbose=0)
+        sweeps.sweep(suite="mujoco100k", episodes=3, envs=["Hopper-v5"], results_dir=tmp_path, verbose=0)
 
 
 def test_slow_env_benchmark_runs_resumes_and_reports(tmp_path, capsys):
-    from benchmarks import slow_env
+    from benchmarks.studies import slow_env
 
     args = ["--envs", "Pendulum-v1", "--delays", "0.0005", "--seeds", "0", "--episodes", "2", "--output", str(tmp_path)]
     slow_env.main([*args, "--rows", "denfac_n1", "denfac_n2_async", "sac_n4"])

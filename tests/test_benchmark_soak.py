@@ -1,10 +1,10 @@
-"""Smoke test of ``python -m benchmarks.soak``: a few episodes, the per-episode records and the summary written."""
+"""Smoke test of ``python -m benchmarks.studies.soak``: a few episodes, the per-episode records and the summary written."""
 
 from __future__ import annotations
 
 import json
 
-from benchmarks import soak
+from benchmarks.studies import soak
 
 
 def test_soak_smoke(tmp_path) -> None:

@@ -4,7 +4,7 @@ import gymnasium as gym
 import pytest
 from torch.utils.flop_counter import FlopCounterMode
 
-from benchmarks import update_cost
+from benchmarks.studies import update_cost
 from sb3_denfac import DENFAC
 
 

@@ -20,9 +20,11 @@ from stable_baselines3 import TD3
 from stable_baselines3.common.env_util import make_vec_env
 
 from benchmarks import run as runner
-from benchmarks import stats as st
-from benchmarks import store, suites, verdicts
-from benchmarks.hyperparams import denfac_critic_steps_per_episode, load_hyperparams
+from benchmarks.reports import stats as st
+from benchmarks.reports import verdicts
+from benchmarks.runner import store, suites
+from benchmarks.runner import sweep as sweeps
+from benchmarks.runner.hyperparams import denfac_critic_steps_per_episode, load_hyperparams
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback
 from sb3_denfac.envs.facts import env_facts
 from sb3_denfac.zoo.config import OPTIONAL_ENV_PACKAGES, register_optional_env
@@ -111,45 +113,45 @@ def test_env_facts_and_budgets():
 
 
 def test_suites_and_cells():
-    figure3_cells = runner.select_cells("figure3")
+    figure3_cells = sweeps.select_cells("figure3")
     assert len(figure3_cells) == len(set(figure3_cells)) == 6 * 6 * 10 + 6 * 6 * 5
     for algo in ("denfac", "denfac_default", "nfac", "cacla", "cmaes"):
         assert suites.SUITES["figure3"].seeds(algo) == tuple(range(10))
-    generalisation = runner.select_cells("generalisation")
+    generalisation = sweeps.select_cells("generalisation")
     assert {a for a, _, _ in generalisation} == {"denfac_default", "denfac", "sac", "crossq", "sac_matched", "td3_matched"}
     assert len(generalisation) == 6 * 5 * 5 and set(generalisation) <= set(figure3_cells)  # shared runs
     assert [c[2] for c in figure3_cells] == sorted(c[2] for c in figure3_cells)  # seed by seed
-    assert runner.select_cells("generalisation", envs=["pendulum"], seeds=[0]) == [
+    assert sweeps.select_cells("generalisation", envs=["pendulum"], seeds=[0]) == [
         ("denfac", "pendulum", 0), ("denfac_default", "pendulum", 0), ("sac", "pendulum", 0), ("crossq", "pendulum", 0),
         ("sac_matched", "pendulum", 0), ("td3_matched", "pendulum", 0),
     ]  # fmt: skip
     with pytest.raises(ValueError, match="unknown --suite"):
-        runner.select_cells("nope")
+        sweeps.select_cells("nope")
     with pytest.raises(ValueError, match="unknown --algos"):
-        runner.select_cells(None, ["nope"], ["cartpole"], [0])
+        sweeps.select_cells(None, ["nope"], ["cartpole"], [0])
     # a request the suite does not hold is named, not answered with "0 runs to do"
     with pytest.raises(ValueError, match=r"--envs \['Walker2d-v5'\] not in suite 'ablation'.*leave out --suite"):
-        runner.select_cells("ablation", ["abl:default05"], ["hopper", "Walker2d-v5"])
+        sweeps.select_cells("ablation", ["abl:default05"], ["hopper", "Walker2d-v5"])
     with pytest.raises(ValueError, match=r"--algos \['sac'\] not in suite 'diagnosis'"):
-        runner.select_cells("diagnosis", ["sac"])
+        sweeps.select_cells("diagnosis", ["sac"])
     with pytest.raises(ValueError, match=r"--seeds \[3\] not in suite 'diagnosis'"):
-        runner.select_cells("diagnosis", seeds=[3])
-    diagnosis = runner.select_cells("diagnosis")  # both ways: SAC's ingredients into DENFAC, DENFAC's into SAC
+        sweeps.select_cells("diagnosis", seeds=[3])
+    diagnosis = sweeps.select_cells("diagnosis")  # both ways: SAC's ingredients into DENFAC, DENFAC's into SAC
     assert len(diagnosis) == 8 * 4 * 3 and {"abl:default05", "sac_matched_frozen"} <= {a for a, _, _ in diagnosis}
     frozen = load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
-    matched = runner.select_cells("matched")
+    matched = sweeps.select_cells("matched")
     assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 9 * 7 * 5
     ablation = suites.SUITES["ablation"]
     assert ablation.study == "ablation" and ablation.diagnostics_every > 0
     # a user's runs go to runs/<study>/ under the current directory, never into the committed benchmarks/results/
-    assert runner.default_results_dir("ablation") == Path.cwd() / "runs" / "ablation"
-    assert runner.default_results_dir(None) == Path.cwd() / "runs" / "sweep"
-    assert runner.COMMITTED_RESULTS not in runner.default_results_dir("matched").parents
+    assert sweeps.default_results_dir("ablation") == Path.cwd() / "runs" / "ablation"
+    assert sweeps.default_results_dir(None) == Path.cwd() / "runs" / "sweep"
+    assert sweeps.COMMITTED_RESULTS not in sweeps.default_results_dir("matched").parents
     assert "abl:faithful" in ablation.algos and not any("proto" in a for a in ablation.algos)
     assert suites.budget("halfcheetah", None, ablation).episodes == 30 and suites.budget("halfcheetah").episodes == 100
-    assert runner.parse_episodes(["60", "halfcheetah=20"])["halfcheetah"] == 20
-    assert runner.parse_episodes(["60"])["pendulum"] == 60 and runner.parse_episodes(None) is None
+    assert sweeps.parse_episodes(["60", "halfcheetah=20"])["halfcheetah"] == 20
+    assert sweeps.parse_episodes(["60"])["pendulum"] == 60 and sweeps.parse_episodes(None) is None
 
 
 def test_hyperparams_lookup(tmp_path):
@@ -192,7 +194,7 @@ def test_ablation_configurations_take_the_papers_settings_from_one_place():
 def test_row_files_resolve_bases_and_presets(tmp_path):
     """A row file's rows start from their ``base`` row or ``preset``, their own keys merged over it (policy_kwargs and
     net_arch key by key); a missing base or a loop of bases is named."""
-    from benchmarks.rows import chain, load_rows, read_rows, resolve
+    from benchmarks.runner.rows import chain, load_rows, read_rows, resolve
     from sb3_denfac.denfac.presets import PAPER, with_overrides
 
     path = tmp_path / "rows.yml"
@@ -345,15 +347,16 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     (tmp_path / "hp" / "td3.yml").write_text("default:\n  learning_starts: 10\n  policy_kwargs:\n    net_arch: [16]\n")
     out = tmp_path / "out"
     kwargs = dict(results_dir=out, hyperparams_dirs=[tmp_path / "hp"], workers=2, verbose=0, zoo_logs=tmp_path / "zoo")
-    status = runner.sweep(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **kwargs)
+    status = runner.run(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **kwargs)
     assert len(status["done"]) == 8 and not status["failed"] and not status["skipped"]
 
     records = {(r["algo"], r["seed"]): r for r in store.read_runs(out)}
     assert len(records) == 8 and not [p for p in out.iterdir() if p.is_dir()]  # no per-run files: one runs file
     assert {p.name for p in out.iterdir()} >= {
-        "all_runs.md", "all_runs.png", "all_runs_compute.png", "all_runs_profile.png", "figure3.md", "figure3.png",
-        "figure3_compute.png", "figure3_profile.png", "runs.csv", "runs.jsonl.gz", "sweeps.jsonl",
+        "all_runs.md", "all_runs.png", "all_runs_compute.png", "all_runs_profile.png", "runs.csv", "runs.jsonl.gz",
+        "sweeps.jsonl",
     }  # fmt: skip
+    assert not list(out.glob("figure3*"))  # cells outside a suite: the report of all runs, no suite's
     for record in records.values():  # CartPole's paper measure is the episode return
         eps = record["episodes"]
         assert len(eps["episode"]) == 3 and all(c > 0 for c in eps["cpu_time"])
@@ -372,7 +375,7 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     runs = {(r["algo"], r["seed"]): r for r in _rows(out / "runs.csv")}
     assert runs[("sac", "0")]["trained"] == "False" and runs[("td3", "0")]["trained"] == "True"
 
-    report = (out / "figure3.md").read_text()
+    report = (out / "all_runs.md").read_text()
     assert "Runs left out because their model never trained" in report
     tables = report.split("## cartpole")[1]
     assert "SB3 TD3" in tables and "SB3 SAC" not in tables.split("## Aggregates")[0]
@@ -380,7 +383,7 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     assert re.search(r"\| DENFAC \(faithful\) more data-efficient than SB3 TD3 +\| cartpole +\|", report)
     assert re.search(r"\| DENFAC more data-efficient than DDPG +\| cartpole +\| pending: no runs of DDPG", report)
     assert "SB3 SAC" not in report.split("## Verdicts")[1]
-    for png in ("figure3.png", "figure3_compute.png", "figure3_profile.png", "all_runs.png"):
+    for png in ("all_runs.png", "all_runs_compute.png", "all_runs_profile.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG", png
     zoo = np.load(tmp_path / "zoo" / "td3" / "sb3_denfac-ContinuousCartPole-v0_0" / "evaluations.npz")
     assert zoo["results"].shape == (3, 1) and np.all(np.diff(zoo["timesteps"]) > 0)
@@ -391,12 +394,12 @@ def test_tiny_sweep_end_to_end_and_resume(tmp_path, monkeypatch):
     *_, final = last
     path.write_bytes(path.read_bytes()[:-25])
     assert len(store.read_runs(out)) == 7
-    status = runner.sweep(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **{**kwargs, "workers": 0})
+    status = runner.run(["denfac", "cmaes", "td3", "sac"], ["cartpole"], [0, 1], 3, **{**kwargs, "workers": 0})
     assert [(t["algo"], t["seed"]) for t in status["done"]] == [(final["algo"], final["seed"])]
     assert len(status["skipped"]) == 7 and len(store.read_runs(out)) == 8
     # Another budget is another run: the 3-episode runs do not stand for 2-episode ones.
-    assert runner.select_cells(None, ["td3"], ["cartpole"], [0]) == [("td3", "cartpole", 0)]
-    status = runner.sweep(["td3"], ["cartpole"], [0], 2, **{**kwargs, "workers": 0, "analysis": False})
+    assert sweeps.select_cells(None, ["td3"], ["cartpole"], [0]) == [("td3", "cartpole", 0)]
+    status = runner.run(["td3"], ["cartpole"], [0], 2, **{**kwargs, "workers": 0, "analysis": False})
     assert len(status["done"]) == 1 and len(store.read_runs(out)) == 9
 
 
@@ -431,8 +434,8 @@ def test_matched_schedule_peers_take_denfacs_gradient_steps(tmp_path):
             k: v for k, v in base.items() if k not in ("train_freq", "gradient_steps")
         }
     assert load_hyperparams("sac_utd20", "pendulum")[0]["gradient_steps"] == 20
-    status = runner.sweep(["denfac_default", "sac_matched"], ["pendulum"], [0], 3, results_dir=tmp_path, workers=0,
-                          analysis=False, verbose=0)  # fmt: skip
+    status = sweeps.sweep(["denfac_default", "sac_matched"], ["pendulum"], [0], 3, results_dir=tmp_path, workers=0,
+                          verbose=0)  # fmt: skip
     assert len(status["done"]) == 2
     steps = {r["algo"]: r["gradient_steps"] for r in store.read_runs(tmp_path)}
     # two updates (after episodes 1 and 2; the budget stops training at the end of the third)
@@ -442,12 +445,12 @@ def test_matched_schedule_peers_take_denfacs_gradient_steps(tmp_path):
 def test_ray_missing_gives_clear_error(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
     with pytest.raises(SystemExit, match="pip install"):
-        runner.sweep(["td3"], ["cartpole"], [0], 1, results_dir=tmp_path, ray_address="auto", verbose=0)
+        sweeps.sweep(["td3"], ["cartpole"], [0], 1, results_dir=tmp_path, ray_address="auto", verbose=0)
 
 
 def test_ray_sweep(tmp_path):
     pytest.importorskip("ray")
-    status = runner.sweep(["td3"], ["cartpole"], [0], 2, results_dir=tmp_path, ray_address="local", verbose=0)
+    status = sweeps.sweep(["td3"], ["cartpole"], [0], 2, results_dir=tmp_path, ray_address="local", verbose=0)
     assert len(status["done"]) == 1 and store.finished_cells(tmp_path) == {("td3", "cartpole", 0, 2, None)}
 
 
@@ -455,7 +458,7 @@ def test_cost_extrapolation_recovers_the_cost_models():
     """Synthetic per-episode CPU times: the step model and the replay model (cost growing with |D|) are recovered."""
     import pandas as pd
 
-    from benchmarks import cost
+    from benchmarks.studies import cost
 
     lengths = np.array([500, 120, 300, 500, 40, 500, 250, 500, 500, 80, 500, 500, 360, 500])
     steps = np.cumsum(lengths)
@@ -478,7 +481,7 @@ def test_cost_extrapolation_recovers_the_cost_models():
 def test_missing_cells_cost_the_seeds_left_from_measured_runs():
     import pandas as pd
 
-    from benchmarks import tables
+    from benchmarks.reports import tables
 
     suite = suites.Suite("t", ("pendulum", "cartpole"), ((("sac",), (0, 1, 2)),), "test")
     runs = pd.DataFrame(dict(algo=["sac", "sac"], env=["pendulum"] * 2, seed=[0, 1], cpu_time=[3600.0, 7200.0]))
@@ -526,8 +529,8 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
     """Episodes, env steps and CPU seconds at the first episode whose best-so-far reaches the level, per algorithm."""
     import pandas as pd
 
-    from benchmarks import tables
-    from benchmarks.suites import ALGOS
+    from benchmarks.reports import tables
+    from benchmarks.runner.suites import ALGOS
 
     rows = []
     for seed, returns in enumerate(([500.0, 1000.0, 1000.0], [200.0, 300.0, 400.0])):
@@ -549,8 +552,9 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
 def test_survival_bonus_separates_standing_from_moving(tmp_path):
     """On an env that pays a survival bonus (Hopper), a run that stands still for the whole episode and one that moves
     forward and falls can have the same return; the reports give the part beyond the bonus, which tells them apart."""
-    from benchmarks import analysis, store, tables
-    from benchmarks.suites import ALGOS
+    from benchmarks.reports import analysis, tables
+    from benchmarks.runner import store
+    from benchmarks.runner.suites import ALGOS
 
     def record(algo, returns, lengths):
         n, clock = len(returns), [float(i) for i in range(1, len(returns) + 1)]
@@ -598,7 +602,8 @@ def test_bootstrap_intervals_print_no_warning_per_call(monkeypatch):
 
 def test_reports_name_the_runs_trained_on_a_gpu(tmp_path):
     """A run's CPU seconds leave out a GPU's work: the report says which runs trained on one (old records: the CPU)."""
-    from benchmarks import analysis, store
+    from benchmarks.reports import analysis
+    from benchmarks.runner import store
 
     def record(seed, machine):
         n = 3

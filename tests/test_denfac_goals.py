@@ -10,7 +10,7 @@ from gymnasium import spaces
 from stable_baselines3 import HerReplayBuffer
 from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 
-from benchmarks.task import evaluate
+from benchmarks.runner.task import evaluate
 from sb3_denfac import DENFAC, SoftDENFAC, presets
 from sb3_denfac.denfac import DENFACDictReplayBuffer, DENFACHerReplayBuffer
 from sb3_denfac.denfac.fast import FastUpdater
@@ -211,7 +211,7 @@ def panda_reach_success(model, episodes: int = 20) -> float:
 def panda_reach_run(seed: int, episodes: int = 50, **overrides) -> tuple[float, float]:
     """The success of the shipped zoo entry (with ``overrides``) before and after ``episodes`` training episodes from
     ``seed``, the training goals seeded too (``SeededResets``: the run repeats on one CPU)."""
-    from benchmarks.hyperparams import load_hyperparams
+    from benchmarks.runner.hyperparams import load_hyperparams
     from sb3_denfac.zoo import make_model
 
     hyperparams, _ = load_hyperparams("denfac", "PandaReach-v3")
@@ -258,11 +258,12 @@ def test_panda_reach_without_its_package_names_the_extra(tmp_path, monkeypatch) 
 
 def test_robotics_benchmark_runs_a_goal_env_and_reports(tmp_path):
     """The robotics suite's rows (DENFAC + HER, SB3 SAC + HER on DENFAC's schedule) on a goal env from zoo-style files,
-    evaluated by the share of goals reached, and ``benchmarks.robotics``'s report (table, target line, figure)."""
+    evaluated by the share of goals reached, and ``benchmarks.reports.robotics``'s report (table, target line, figure)."""
     import yaml
 
-    from benchmarks import robotics, store
     from benchmarks import run as runner
+    from benchmarks.reports import robotics
+    from benchmarks.runner import store
 
     env_id = "PointReachTest-v0"
     if env_id not in gym.registry:

@@ -1,4 +1,4 @@
-"""Sweeps on several machines: ``benchmarks.run.sweep(..., ray_address=...)`` against a real Ray cluster.
+"""Sweeps on several machines: ``benchmarks.runner.sweep.sweep(..., ray_address=...)`` against a real Ray cluster.
 
 A module fixture starts a cluster with the ``ray`` command line of this environment: a head node with no CPUs (so every
 task must run elsewhere) and one worker node with one CPU, each ``ray start ... --block`` in its own process group, with
@@ -216,7 +216,7 @@ def _finish(sweep: subprocess.Popen, log: Path, timeout: float = 240) -> str:
 
 def _records(results: Path) -> list[dict]:
     """Every record of the runs file, in file order, duplicates included (``store.read_runs`` would hide them)."""
-    from benchmarks import store
+    from benchmarks.runner import store
 
     return list(store.read_records(results))
 
@@ -231,12 +231,11 @@ def _columns(records: list[dict]) -> dict[tuple[str, str, int], dict[str, list]]
 @pytest.fixture(scope="module")
 def local_sweep(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str, int], dict[str, list]]:
     """The same sweep run locally, in this process (``workers=0``): the reference for the runs on the cluster."""
-    from benchmarks import run, store
+    from benchmarks.runner import store
+    from benchmarks.runner.sweep import sweep
 
     results = tmp_path_factory.mktemp("local")
-    status = run.sweep(
-        algos=ALGOS, envs=ENVS, seeds=SEEDS, episodes=EPISODES, results_dir=results, workers=0, analysis=False, verbose=0
-    )
+    status = sweep(algos=ALGOS, envs=ENVS, seeds=SEEDS, episodes=EPISODES, results_dir=results, workers=0, verbose=0)
     assert len(status["done"]) == len(SEEDS) and not status["failed"]
     runs = store.read_runs(results)
     assert all(len(r["episodes"]["return"]) == EPISODES for r in runs)

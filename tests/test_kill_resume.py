@@ -115,7 +115,7 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     model, replay buffer, step and update counters) instead of from the start; its whole record matches an
     uninterrupted run's counts."""
     from benchmarks import run as runner
-    from benchmarks import store
+    from benchmarks.runner import store
 
     episodes = 8
     args = ["--algos", algo, "--envs", "pendulum", "--seeds", "0", "--episodes", str(episodes), "--workers", "0"]
@@ -139,14 +139,14 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
         os.killpg(child.pid, signal.SIGKILL)
         child.wait()
     (folder,) = (killed / "checkpoints").iterdir()
-    from benchmarks.checkpoints import load_checkpoint
+    from benchmarks.runner.checkpoints import load_checkpoint
 
     saved = load_checkpoint(folder)
     assert saved is not None and 3 <= len(saved["records"]) < episodes
     assert not store.read_runs(killed)  # the run had not finished
-    from benchmarks import suites
-    from benchmarks.checkpoints import resume_model
-    from benchmarks.hyperparams import load_hyperparams
+    from benchmarks.runner import suites
+    from benchmarks.runner.checkpoints import resume_model
+    from benchmarks.runner.hyperparams import load_hyperparams
     from sb3_denfac.zoo import make_model
 
     fresh = make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", load_hyperparams(algo, "pendulum")[0])
@@ -191,9 +191,9 @@ def test_every_benchmark_row_saves_and_resumes_its_run(tmp_path: Path, algo: str
     """Each algorithm of the sweep checkpoints after an episode's update and trains on from the checkpoint."""
     from stable_baselines3.common.callbacks import CallbackList
 
-    from benchmarks import suites
-    from benchmarks.checkpoints import RunCheckpoint, load_checkpoint, resume_model
-    from benchmarks.hyperparams import load_hyperparams
+    from benchmarks.runner import suites
+    from benchmarks.runner.checkpoints import RunCheckpoint, load_checkpoint, resume_model
+    from benchmarks.runner.hyperparams import load_hyperparams
     from sb3_denfac.common.callbacks import EpisodePerformanceCallback
     from sb3_denfac.zoo import make_model
 

@@ -1,4 +1,4 @@
-"""The README answers at a glance and stays true: its answer block is what ``python -m benchmarks.readme`` writes from
+"""The README answers at a glance and stays true: its answer block is what ``python -m benchmarks.reports.readme`` writes from
 the committed runs, it is short, it embeds a committed figure, its commands are CI's, and its relative links resolve."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import readme
+from benchmarks.reports import readme
 
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
@@ -25,7 +25,7 @@ def generated(tmp_path_factory) -> Path:
 
 
 def test_the_readme_answer_is_generated_from_the_committed_runs(generated):
-    assert (generated / "README.md").read_text() == README.read_text(), "run `python -m benchmarks.readme`"
+    assert (generated / "README.md").read_text() == README.read_text(), "run `python -m benchmarks.reports.readme`"
     assert (generated / "answer.md").read_text() == (readme.SWEEP / "answer.md").read_text()
     assert (generated / "answer.png").stat().st_size > 10_000
     block = README.read_text().split(readme.START)[1].split(readme.END)[0]

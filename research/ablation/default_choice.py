@@ -1,7 +1,7 @@
 """Section 27's comparison of the default candidates (``journal.md``): the probability that each candidate's run beats
 the 0.5 default's and the matched SAC's, averaged over the eight envs that all of them ran at 5 seeds (the matched
 suite's seven and Walker2d-v5), on the best-so-far, the last-10 mean and the final deterministic evaluation
-(``benchmarks.stats.probability_of_improvement``: rliable's, with its 95% interval).
+(``benchmarks.reports.stats.probability_of_improvement``: rliable's, with its 95% interval).
 
 Runs: the sweep's rows (``benchmarks/results/sweep``) and the ablation's (``benchmarks/results/ablation`` and its
 ``walker2d/``); a cell in both is taken from the sweep. ``python -m research.ablation.default_choice``
@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks import analysis, store
-from benchmarks import stats as st
+from benchmarks.reports import analysis
+from benchmarks.reports import stats as st
+from benchmarks.runner import store
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 FOLDERS = (RESULTS / "sweep", RESULTS / "ablation", RESULTS / "ablation" / "walker2d")

@@ -19,7 +19,7 @@ import numpy as np
 import panda_gym  # noqa: F401  (registers PandaReach-v3)
 from stable_baselines3 import SAC, HerReplayBuffer
 
-from benchmarks.task import evaluate
+from benchmarks.runner.task import evaluate
 from sb3_denfac import DENFAC
 
 

@@ -8,7 +8,7 @@ default (K = 10 fitted iterations per episode, with one env as the reference) ei
 back (``DENFAC``) or one update of 4 K (``Joint``: a subclass whose ``_run_updates``, the documented hook, sums the
 budget). Same fitted iterations, same critic and actor steps; the difference is that each update starts a new
 updater (the proximal actor's anchor pi_old, the fast updater's flat copies) and draws its own targets' noise.
-Episodes to the level (-200) from the ``benchmarks.slow_env`` machinery (no delay); results: ``joint_updates.json``
+Episodes to the level (-200) from the ``benchmarks.studies.slow_env`` machinery (no delay); results: ``joint_updates.json``
 and the README beside this file.
 """
 
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from stable_baselines3.common.env_util import make_vec_env
 
-from benchmarks.slow_env import reached, train
+from benchmarks.studies.slow_env import reached, train
 from sb3_denfac import DENFAC
 
 

@@ -3,7 +3,7 @@
 The package's networks are tiny (tens of units): splitting their matrix products over several intra-op threads only
 adds synchronisation, and on a machine whose cores are busy with other work the waiting dominates. Measured on a
 2-core machine with another process burning one core, DENFAC's ``learn(2000)`` on Pendulum-v1 took many times longer
-with torch's default threads than with one (``benchmarks/results/threads/threads.md``). So by default ``learn()`` runs
+with torch's default threads than with one (``research/torch_threads/README.md``). So by default ``learn()`` runs
 with one torch thread, and gives the caller's setting back when it returns or raises:
 
 - ``torch_threads=1`` (default): ``torch.set_num_threads(1)`` for the duration of ``learn()`` (rollouts, updates and

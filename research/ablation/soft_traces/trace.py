@@ -19,8 +19,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
 import sb3_denfac.envs  # noqa: F401  (the paper's env ids)
-from benchmarks import suites
-from benchmarks.hyperparams import load_hyperparams
+from benchmarks.runner import suites
+from benchmarks.runner.hyperparams import load_hyperparams
 from sb3_denfac.envs.facts import env_facts
 from sb3_denfac.soft_denfac import SoftDENFACPolicy
 from sb3_denfac.zoo import algorithm_class

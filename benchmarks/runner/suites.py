@@ -2,10 +2,10 @@
 
 An *algorithm* here is a benchmark row: a zoo algorithm plus a YAML file (``denfac`` and ``denfac_default`` are the
 same class with different files). A *suite* is a set of (algorithm, env, seed) cells; suites share their runs, so a
-cell that two suites contain is trained once. The hyperparameters of a row on an env: ``benchmarks.hyperparams``.
+cell that two suites contain is trained once. The hyperparameters of a row on an env: ``benchmarks.runner.hyperparams``.
 
 The ablation's rows (``abl:<name>``) and its suite are data, ``configs/ablation.yml``: this module reads their names and
-budgets, ``benchmarks.hyperparams`` their settings (through ``benchmarks.rows``).
+budgets, ``benchmarks.runner.hyperparams`` their settings (through ``benchmarks.runner.rows``).
 """
 
 from __future__ import annotations
@@ -17,20 +17,22 @@ from typing import Any
 
 import yaml
 
-from benchmarks import rows as row_files
+from benchmarks.runner import rows as row_files
 
-_HERE = Path(__file__).resolve().parent
-PACKAGE_HYPERPARAMS_DIR = _HERE.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
-BENCHMARK_CONFIGS_DIR = _HERE / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
+_BENCHMARKS = Path(__file__).resolve().parents[1]
+PACKAGE_HYPERPARAMS_DIR = _BENCHMARKS.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
+BENCHMARK_CONFIGS_DIR = _BENCHMARKS / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
 ABLATION_ROWS = BENCHMARK_CONFIGS_DIR / "ablation.yml"  # the ablation's rows and suite, as data
-SWEEP_PLAN = _HERE / "results" / "cost" / "sweep_plan.csv"  # estimated CPU seconds per run, written by benchmarks.cost
+SWEEP_PLAN = (
+    _BENCHMARKS / "results" / "cost" / "sweep_plan.csv"
+)  # estimated CPU seconds per run, written by benchmarks.studies.cost
 
 
 @dataclass(frozen=True)
 class Algo:
     """A benchmark row: ``zoo_algo`` with the settings of ``<name>.yml`` (the zoo's lookup), or of another row
     (``base``) with ``overrides`` on top, or of the row ``row`` of the row file ``rows_file`` (the ablation's,
-    :mod:`benchmarks.rows`); ``label`` for tables. ``benchmarks.hyperparams.load_hyperparams`` resolves them."""
+    :mod:`benchmarks.runner.rows`); ``label`` for tables. ``benchmarks.runner.hyperparams.load_hyperparams`` resolves them."""
 
     name: str
     zoo_algo: str
@@ -43,7 +45,7 @@ class Algo:
 
 
 #: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC
-#: (``"denfac"``: ``benchmarks.hyperparams.denfac_critic_steps_per_episode``).
+#: (``"denfac"``: ``benchmarks.runner.hyperparams.denfac_critic_steps_per_episode``).
 MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
 #: A high update-to-data ratio, as DroQ and REDQ use (20 gradient steps per environment step).
 HIGH_UTD = (("train_freq", 1), ("gradient_steps", 20))

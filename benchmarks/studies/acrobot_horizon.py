@@ -16,7 +16,7 @@ The goal is checked at every decision (as the env does) and, with ``--substeps``
 points (the authors' reward takes the maximum over the 20 ODE steps of a decision).
 Writes ``benchmarks/results/acrobot_horizon/acrobot_horizon.{json,md}``.
 
-Usage: ``python -m benchmarks.acrobot_horizon [--horizon 75] [--restarts 6] [--generations 300]``
+Usage: ``python -m benchmarks.studies.acrobot_horizon [--horizon 75] [--restarts 6] [--generations 300]``
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / "results" / "acrobot_horizon"
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "acrobot_horizon"
 GOAL = 0.99
 
 
@@ -206,7 +206,10 @@ def main(argv: list[str] | None = None) -> None:
         if "switches" in r:
             what = f"start {r['first']:+.0f}, switch after decisions {r['switches']}; on the env: {r['replayed_on_env']}"
         lines.append(f"| {r['family']} | {what} | {r.get('horizon', 500)} | {steps} | {r['best_height']:.4f} |")
-    lines += ["", f"CPU seconds: {out['cpu_seconds']:.0f}. Command: `python -m benchmarks.acrobot_horizon` with {vars(args)}."]
+    lines += [
+        "",
+        f"CPU seconds: {out['cpu_seconds']:.0f}. Command: `python -m benchmarks.studies.acrobot_horizon` with {vars(args)}.",
+    ]
     stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -5,7 +5,7 @@ fresh default models with ``n_critics`` 1 and 2 (fast updater, the default's), a
 interleaved in every repeat, with one torch thread: the ratio is what the second critic costs per update, measured side
 by side on the same real data. Results: ``results/update_cost/update_cost_critics.{json,md}`` (commit, machine, load, medians).
 
-Usage: ``python -m benchmarks.update_cost_critics [--repeats 7] [--episodes 20] [--envs Pendulum-v1 ...]``
+Usage: ``python -m benchmarks.studies.update_cost_critics [--repeats 7] [--episodes 20] [--envs Pendulum-v1 ...]``
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-from benchmarks.task import git_state, machine_info
-from benchmarks.update_cost import RESULTS
+from benchmarks.runner.task import git_state, machine_info
+from benchmarks.studies.update_cost import RESULTS
 from sb3_denfac import DENFAC
 
 

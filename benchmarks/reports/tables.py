@@ -1,6 +1,6 @@
-"""The tables of a study's reports, from its runs (``benchmarks.analysis.load``): per env (:func:`env_table`), the
+"""The tables of a study's reports, from its runs (``benchmarks.reports.analysis.load``): per env (:func:`env_table`), the
 settings each row was given (:func:`settings_table`), the cells a suite still misses (:func:`missing_cells`), and the
-``matched`` suite's answer to the user (:func:`answer_table`). ``benchmarks.analysis`` writes them into the reports.
+``matched`` suite's answer to the user (:func:`answer_table`). ``benchmarks.reports.analysis`` writes them into the reports.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchmarks import suites
-from benchmarks.suites import ALGOS, SUITES, Suite, estimated_cost
+from benchmarks.runner import suites
+from benchmarks.runner.suites import ALGOS, SUITES, Suite, estimated_cost
 from sb3_denfac.envs.facts import env_facts
 
 #: The rows of the user's answer (suite ``matched``): DENFAC's default (its soft actor, its data-efficient preset) against
@@ -218,7 +218,7 @@ def _of_budget(suite: Suite, run: Any) -> bool:
 def missing_cells(suite: Suite, runs: pd.DataFrame) -> pd.DataFrame:
     """Finished/wanted seeds per (algo, env) of the suite where incomplete, with the CPU hours still needed: the median
     CPU seconds of the cell's finished runs times the seeds left, or where it has none, the plan's estimate
-    (``benchmarks.cost``, full-length episodes: an upper bound where episodes end early), marked <=. A cell with
+    (``benchmarks.studies.cost``, full-length episodes: an upper bound where episodes end early), marked <=. A cell with
     neither is marked "cost not measured" and counted apart in the total.
 
     Only runs made for the cell's budget in the suite count (where ``runs`` says, ``analysis.BUDGET_FIELDS``): a

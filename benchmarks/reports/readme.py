@@ -8,7 +8,7 @@ A run that never reached the level counts as beyond the budget, so a median beyo
 Writes ``answer.md`` (the table) and ``answer.png`` (the figure) into the study's folder, and the table into the
 README between ``<!-- answer:start -->`` and ``<!-- answer:end -->`` (``tests/test_readme.py`` keeps them equal).
 
-Usage: ``python -m benchmarks.readme`` (options: ``--results``, ``--out``, ``--readme``)
+Usage: ``python -m benchmarks.reports.readme`` (options: ``--results``, ``--out``, ``--readme``)
 """
 
 from __future__ import annotations
@@ -20,11 +20,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks import analysis, plots, suites, tables
-from benchmarks.suites import SUITES
+from benchmarks.reports import analysis, plots, tables
+from benchmarks.runner import suites
+from benchmarks.runner.suites import SUITES
 from sb3_denfac.envs.facts import env_facts
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SWEEP = REPO / "benchmarks" / "results" / "sweep"
 README = REPO / "README.md"
 START, END = "<!-- answer:start -->", "<!-- answer:end -->"
@@ -195,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     m = measure(args.results)
     table_md = table(m)
-    (out / "answer.md").write_text(f"# The README's answer (`python -m benchmarks.readme`)\n\n{body(table_md, '')}")
+    (out / "answer.md").write_text(f"# The README's answer (`python -m benchmarks.reports.readme`)\n\n{body(table_md, '')}")
     figure(m, out / FIGURE)
     readme = Path(args.readme)
     readme.write_text(replace_block(readme.read_text(), block(table_md)))

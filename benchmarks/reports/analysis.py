@@ -1,12 +1,12 @@
-"""Analysis of a study's runs: tables (``benchmarks.tables``), aggregates and verdicts (rliable), plots; one report per
+"""Analysis of a study's runs: tables (``benchmarks.reports.tables``), aggregates and verdicts (rliable), plots; one report per
 suite.
 
-Reads the study's compact runs file (``<results>/runs.jsonl.gz``, ``benchmarks.store``) and writes next to it:
+Reads the study's compact runs file (``<results>/runs.jsonl.gz``, ``benchmarks.runner.store``) and writes next to it:
 ``runs.csv`` (one line per run, with its measures), and for every suite of the study with finished runs
 ``<suite>.md`` (tables, aggregates, verdicts), ``<suite>.png`` (curves), ``<suite>_compute.png`` (best-so-far against
 CPU seconds) and ``<suite>_profile.png`` (performance profile); ``all_runs.md`` covers every finished run.
 
-Usage: ``python -m benchmarks.analysis --results benchmarks/results/sweep``
+Usage: ``python -m benchmarks.reports.analysis --results benchmarks/results/sweep``
 """
 
 from __future__ import annotations
@@ -19,10 +19,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks import plots, store, verdicts
-from benchmarks import stats as st
-from benchmarks.suites import ALGOS, ROBOTICS_ENVS, SUITES, Suite
-from benchmarks.tables import (
+from benchmarks.reports import plots, verdicts
+from benchmarks.reports import stats as st
+from benchmarks.reports.tables import (
     BEYOND_BONUS_LEVEL,
     answer_table,
     beyond_survival,
@@ -33,6 +32,8 @@ from benchmarks.tables import (
     row_order,
     settings_table,
 )
+from benchmarks.runner import store
+from benchmarks.runner.suites import ALGOS, ROBOTICS_ENVS, SUITES, Suite
 from sb3_denfac.common.performance import fall_back_fraction
 from sb3_denfac.envs.facts import env_facts
 
@@ -42,6 +43,7 @@ RUN_FIELDS = [
     "last10_beyond_survival",
     *("hyperparams_source", "commit", "device"),
 ]
+COMMITTED = Path(__file__).resolve().parents[1] / "results"  # the committed studies, benchmarks/results/<study>/
 #: The budget a run was made for (not written to ``runs.csv``): a suite counts a cell's runs of its own budget only.
 BUDGET_FIELDS = ["episodes_requested", "timesteps_requested"]
 
@@ -227,11 +229,11 @@ def aggregates(runs: pd.DataFrame, envs: list[str], out: Path, stem: str) -> lis
     return lines
 
 
-def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str:
-    """Write runs.csv and the reports of the study's suites in ``results_dir``; return the ``all_runs`` markdown.
+def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> list[Path]:
+    """Write runs.csv and the reports of the study's suites in ``results_dir``; return the reports written.
 
-    With ``suites``, only those suites' reports are rewritten (``all_runs.md`` too only if named, as ``all_runs``);
-    the return value is then the last report written."""
+    With ``suites``, only those suites' reports are rewritten (``all_runs.md`` too only if named, as ``all_runs``).
+    A study of env-step budgets gets its one report (``mujoco100k.md``), the goal-conditioned one ``robotics.md``."""
     chosen = None if suites is None else set(suites)
     if chosen is not None:
         known = {name for name, suite in SUITES.items() if suite.study != "ablation"} | {"all_runs"}
@@ -240,20 +242,22 @@ def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str
     out = Path(results_dir)
     records = store.read_runs(out)
     if any(record.get("timesteps_requested") for record in records):  # budgets of env steps
-        from benchmarks import mujoco100k  # (imports nothing of this module)
+        from benchmarks.reports import mujoco100k  # (imports nothing of this module)
 
-        return mujoco100k.report(out)
+        mujoco100k.report(out)
+        return [out / "mujoco100k.md"]
     if records and all(record["env"] in ROBOTICS_ENVS for record in records):  # the goal-conditioned study
-        from benchmarks import robotics  # (imports nothing of this module)
+        from benchmarks.reports import robotics  # (imports nothing of this module)
 
-        return robotics.report(out)
+        robotics.report(out)
+        return [out / "robotics.md"]
     episodes, runs = load_records(records)
     if runs.empty:
         raise FileNotFoundError(f"no finished runs in {store.runs_path(out)}")
     runs.to_csv(out / "runs.csv", index=False, columns=RUN_FIELDS)
-    text = ""
+    written = []
     for suite in SUITES.values():
-        if suite.study == "ablation":  # its tables: benchmarks.ablation_analysis
+        if suite.study == "ablation":  # its tables: benchmarks.reports.ablation_analysis
             continue
         if chosen is not None and suite.name not in chosen:
             continue
@@ -262,23 +266,36 @@ def analyse(results_dir: str | Path, suites: Sequence[str] | None = None) -> str
         if not mine.empty:
             text = report(f"Benchmark suite `{suite.name}`", episodes, mine, out, suite.name, suite)
             (out / f"{suite.name}.md").write_text(text)
+            written.append(out / f"{suite.name}.md")
     if chosen is None or "all_runs" in chosen:
-        text = report("All finished runs", episodes, runs, out, "all_runs")
-        (out / "all_runs.md").write_text(text)
-    return text
+        (out / "all_runs.md").write_text(report("All finished runs", episodes, runs, out, "all_runs"))
+        written.append(out / "all_runs.md")
+    return written
+
+
+def report_of_run(results_dir: str | Path, suite: str | None) -> list[Path]:
+    """The report of one run of the runner (``python -m benchmarks.run``), written to ``results_dir``: its suite's
+    alone (the ablation's ``tables.md``), or ``all_runs.md`` for cells outside a suite; the other suites' reports
+    are left as they are (:func:`analyse`, ``python -m benchmarks.reports.analysis``, rewrites them all)."""
+    if suite is not None and SUITES[suite].study == "ablation":
+        from benchmarks.reports import ablation_analysis  # (imports nothing of this module)
+
+        return [ablation_analysis.write_tables(Path(results_dir))]
+    return analyse(results_dir, [suite or "all_runs"])
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--results", default=str(Path(__file__).parent / "results" / "sweep"), help="the study's folder")
+    parser.add_argument("--results", default=str(COMMITTED / "sweep"), help="the study's folder")
     parser.add_argument(
         "--suites", nargs="+", default=None, help="rewrite only these suites' reports ('all_runs' for all_runs.md)"
     )
     args = parser.parse_args(argv)
     try:
-        print(analyse(args.results, args.suites))
+        written = analyse(args.results, args.suites)
     except ValueError as error:
         parser.error(str(error))
+    print(f"wrote {', '.join(str(path) for path in written)} (and runs.csv)")
 
 
 if __name__ == "__main__":

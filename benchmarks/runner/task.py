@@ -6,7 +6,7 @@ count; plus (:class:`RunClock`) the run's CPU seconds so far. Every ``eval_every
 policy that played the episode is evaluated deterministically on a separate env for ``eval_episodes`` episodes; the
 evaluation's own CPU time is left out of the run's CPU seconds.
 
-A run saves checkpoints from which a rerun resumes it (``benchmarks.checkpoints``). With ``BENCHMARK_PROGRESS_DIR``
+A run saves checkpoints from which a rerun resumes it (``benchmarks.runner.checkpoints``). With ``BENCHMARK_PROGRESS_DIR``
 set, each run also rewrites ``<algo>_<env>_<seed>.json`` there at every episode end (episodes, steps, CPU and wall
 seconds so far): how far a run got when a lease or a session ends before it does.
 """
@@ -27,10 +27,10 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from benchmarks.checkpoints import RunCheckpoint, checkpoint_folder, replace_file, restore_callbacks, resume_or_start
-from benchmarks.diagnostics import Diagnostics
+from benchmarks.runner.checkpoints import RunCheckpoint, checkpoint_folder, replace_file, restore_callbacks, resume_or_start
+from benchmarks.runner.diagnostics import Diagnostics
 
-_REPO = Path(__file__).resolve().parent.parent
+_REPO = Path(__file__).resolve().parents[2]
 
 
 def evaluate(model: Any, env: Any, n_episodes: int) -> list[float]:
@@ -198,7 +198,7 @@ class GradientSteps(BaseCallback):
 
 
 class DiagnosticsCallback(BaseCallback):
-    """Critic-fit diagnostics (``benchmarks.diagnostics``) on the buffer after the update that follows every
+    """Critic-fit diagnostics (``benchmarks.runner.diagnostics``) on the buffer after the update that follows every
     ``every``-th episode (DENFAC rows of the ablation)."""
 
     def __init__(self, every: int, performance: Any) -> None:
@@ -234,7 +234,7 @@ def run_key(task: dict[str, Any]) -> dict[str, Any]:
 def run_one(task: dict[str, Any]) -> dict[str, Any]:
     """One (algo, env, seed) run of ``task["zoo_algo"]`` with ``task["hyperparams"]`` (needs only the installed package).
 
-    Returns the run's record for ``benchmarks.store``: ``status`` ``"done"`` with its metadata, per-episode columns,
+    Returns the run's record for ``benchmarks.runner.store``: ``status`` ``"done"`` with its metadata, per-episode columns,
     critic-fit diagnostics (if ``task["diagnostics_every"]``) and log; or ``"failed"`` with the traceback."""
     import torch
 

@@ -6,7 +6,7 @@ on), each process waits for the others, counts its environment steps for ``--sec
 env's median rate (env steps per second of wall time, updates included) and the seconds a ``--steps`` run would take at
 it, so the sweep's runs that fit a lease (a GPU machine lent for minutes, a new server) can be chosen before it starts.
 
-    python -m benchmarks.throughput --algo crossq --envs halfcheetah acrobot --copies 5 --device cuda [--output F.json]
+    python -m benchmarks.studies.throughput --algo crossq --envs halfcheetah acrobot --copies 5 --device cuda [--output F.json]
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from benchmarks import suites
-from benchmarks.hyperparams import load_hyperparams
-from benchmarks.task import git_state, machine_info
+from benchmarks.runner import suites
+from benchmarks.runner.hyperparams import load_hyperparams
+from benchmarks.runner.task import git_state, machine_info
 
 _BARRIER: Any = None
 
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.copies < 1 or args.seconds <= 0:
         parser.error("--copies must be >= 1 and --seconds > 0")
-    from benchmarks.run import check_device
+    from benchmarks.runner.sweep import check_device
 
     try:
         check_device(args.device)

@@ -1,5 +1,5 @@
 """Where a sweep's runs train: in this process or a local process pool (:func:`run_local`), or on a Ray cluster
-(:func:`run_ray`). Each run is ``benchmarks.task.run_one(task)``; its record goes to ``on_result`` as it ends."""
+(:func:`run_ray`). Each run is ``benchmarks.runner.task.run_one(task)``; its record goes to ``on_result`` as it ends."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from benchmarks import task as task_module
+from benchmarks.runner import task as task_module
 
 
 def _init_worker() -> None:
@@ -51,7 +51,7 @@ def run_ray(tasks: list[dict[str, Any]], address: str, on_result: Callable[[dict
             "Every node of the cluster also needs sb3-denfac installed."
         ) from e
     # Ship the run's code by value so cluster nodes need only the installed package, not this checkout.
-    from benchmarks import checkpoints, diagnostics
+    from benchmarks.runner import checkpoints, diagnostics
 
     for module in (task_module, checkpoints, diagnostics):
         ray.cloudpickle.register_pickle_by_value(module)

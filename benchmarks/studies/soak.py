@@ -1,6 +1,6 @@
 """Soak: a long DENFAC run, watching the process memory and the update time per episode for growth.
 
-    python -m benchmarks.soak [--episodes 1000] [--env Pendulum-v1] [--output benchmarks/results/soak]
+    python -m benchmarks.studies.soak [--episodes 1000] [--env Pendulum-v1] [--output benchmarks/results/soak]
 
 Trains the default ``DENFAC("MlpPolicy", env)`` for ``--episodes`` episodes and records, per episode, the process's
 resident memory (``/proc/self/statm``, no psutil) at the episode's end and the wall time of the update that follows it
@@ -94,7 +94,7 @@ def write_markdown(report: dict[str, Any], path: Path) -> None:
     lines = [
         f"# Soak: DENFAC ({'defaults' if size is None else f'D = {size}'}) on {report['env']}, {s['episodes']} episodes",
         "",
-        f"Written by `python -m benchmarks.soak --episodes {report['requested_episodes']}"
+        f"Written by `python -m benchmarks.studies.soak --episodes {report['requested_episodes']}"
         f"{'' if size is None else f' --buffer-size {size}'}`. Commit "
         f"`{git.get('commit', '?')}`{' (with uncommitted changes)' if git.get('modified') else ''}; machine: "
         f"{machine['cpu_model']}, {machine['nproc']} CPUs, torch {machine['torch']}; load average at start / end: "
@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.episodes < 1:
         parser.error("--episodes must be at least 1")
 
-    from benchmarks.task import git_state, machine_info
+    from benchmarks.runner.task import git_state, machine_info
 
     load_start = os.getloadavg()
     result = run(args.episodes, args.env, args.seed, args.buffer_size)

@@ -21,7 +21,7 @@ repeat from copies of the same saved model and buffer.
 median and the slowest.
 
 Results: ``results/update_cost/update_cost.{json,md}``. Usage:
-``python -m benchmarks.update_cost [--repeats 9] [--threads 1 2] [--envs acrobot half_cheetah] [--training-run]``
+``python -m benchmarks.studies.update_cost [--repeats 9] [--threads 1 2] [--envs acrobot half_cheetah] [--training-run]``
 """
 
 from __future__ import annotations
@@ -39,9 +39,9 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 
-from benchmarks.task import git_state, machine_info
+from benchmarks.runner.task import git_state, machine_info
 
-RESULTS = Path(__file__).resolve().parent / "results" / "update_cost"
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "update_cost"
 ENVS = {
     "acrobot": "sb3_denfac/ContinuousAcrobot-v0",
     "cartpole": "sb3_denfac/ContinuousCartPole-v0",

@@ -1,6 +1,6 @@
 """Torch threads inside ``learn()``: the README's example with the package's default against explicit one-thread torch.
 
-    python -m benchmarks.threads [--steps 2000] [--repeats 3] [--busy] [--output benchmarks/results/threads/threads.json]
+    python -m research.torch_threads.threads [--steps 2000] [--repeats 3] [--busy] [--output FILE.json]
 
 Each run is a fresh process (torch's thread pool is set once per process) timing
 ``DENFAC("MlpPolicy", gym.make("Pendulum-v1")).learn(steps)``, in three variants run in rotating order:
@@ -47,9 +47,19 @@ def worker(variant: str, steps: int, seed: int) -> dict[str, Any]:
 
 
 def run_one(variant: str, steps: int, seed: int) -> dict[str, Any]:
-    command = [sys.executable, "-m", "benchmarks.threads", "--worker", variant, "--steps", str(steps), "--seed", str(seed)]
+    command = [
+        sys.executable,
+        "-m",
+        "research.torch_threads.threads",
+        "--worker",
+        variant,
+        "--steps",
+        str(steps),
+        "--seed",
+        str(seed),
+    ]
     env = {key: value for key, value in os.environ.items() if key not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
-    out = subprocess.run(command, capture_output=True, text=True, check=True, env=env, cwd=Path(__file__).parent.parent)
+    out = subprocess.run(command, capture_output=True, text=True, check=True, env=env, cwd=Path(__file__).resolve().parents[2])
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -59,7 +69,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--busy", action="store_true", help="burn the spare cores with processes of our own")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
-    parser.add_argument("--output", type=Path, default=Path("benchmarks/results/threads/threads.json"))
+    parser.add_argument("--output", type=Path, default=Path("research/torch_threads/threads.json"))
     parser.add_argument("--worker", choices=VARIANTS, help=argparse.SUPPRESS)
     parser.add_argument("--seed", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -68,7 +78,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         print(json.dumps(result))
         return result
 
-    from benchmarks.task import git_state, machine_info
+    from benchmarks.runner.task import git_state, machine_info
 
     burners: list[subprocess.Popen] = []
     runs: list[dict[str, Any]] = []

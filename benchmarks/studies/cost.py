@@ -1,6 +1,6 @@
 """Cost of the benchmark sweep, measured before running it: CPU seconds per run for each algorithm x env, and the plan.
 
-Runs every algorithm on every env for a few episodes with the sweep's own runner (``benchmarks.task.run_one``, one
+Runs every algorithm on every env for a few episodes with the sweep's own runner (``benchmarks.runner.task.run_one``, one
 torch thread, results in ``benchmarks/results/cost/runs.jsonl.gz``, resumable), then extrapolates each run to its full budget:
 
 - ``step`` model (TD3, SAC, CrossQ, DDPG, CACLA+: online updates): a constant cost per environment step once
@@ -15,7 +15,7 @@ torch thread, results in ``benchmarks/results/cost/runs.jsonl.gz``, resumable), 
 Both extrapolations assume full-length episodes (an upper bound where episodes end early: CartPole and
 InvertedPendulum falls, the Acrobot goal). Writes ``benchmarks/results/cost/sweep_plan.md`` and ``sweep_plan.csv``.
 
-Usage: ``python -m benchmarks.cost [--algos ...] [--envs ...] [--plan-only]``
+Usage: ``python -m benchmarks.studies.cost [--algos ...] [--envs ...] [--plan-only]``
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks import analysis as fa
-from benchmarks import run as runner
-from benchmarks import store, suites
+from benchmarks.reports import analysis as fa
+from benchmarks.runner import store, suites
+from benchmarks.runner.sweep import sweep
 from sb3_denfac.envs.facts import env_facts
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 COST_DIR = RESULTS / "cost"
 SWEEP_DIR = RESULTS / "sweep"
 REPLAY_ALGOS = {"denfac", "denfac_default"}
@@ -48,7 +48,7 @@ SESSION_CORE_HOURS = 2.5  # one core of one working session, after setup
 def measure(algos: list[str], envs: list[str], cost_dir: Path = COST_DIR) -> None:
     for algo in algos:
         table = REPLAY_EPISODES if algo in REPLAY_ALGOS else MEASURE_EPISODES
-        runner.sweep([algo], envs, [0], {e: table[e] for e in envs}, results_dir=cost_dir, workers=0, analysis=False)
+        sweep([algo], envs, [0], {e: table[e] for e in envs}, results_dir=cost_dir, workers=0)
 
 
 def _buffer_size(algo: str, hyperparams: dict) -> int:

@@ -1,15 +1,16 @@
 """The verdict table: one row per claim of the paper's section 4, and DENFAC against TD3, SAC and CrossQ.
 
-Each claim is decided on each measure of ``benchmarks.stats.MEASURES`` by the rules of ``benchmarks.stats.verdict`` and
-``benchmarks.stats.combine`` from rliable's probability of improvement P(A > B) on one env and its 95% interval.
+Each claim is decided on each measure of ``benchmarks.reports.stats.MEASURES`` by the rules of
+``benchmarks.reports.stats.verdict`` and ``benchmarks.reports.stats.combine`` from rliable's probability of
+improvement P(A > B) on one env and its 95% interval.
 """
 
 from __future__ import annotations
 
 import pandas as pd
 
-from benchmarks import stats as st
-from benchmarks.suites import ALGOS
+from benchmarks.reports import stats as st
+from benchmarks.runner.suites import ALGOS
 from sb3_denfac.envs.facts import env_facts
 
 PAPER_ENVS = ["acrobot", "cartpole", "halfcheetah", "acrobot75"]  # acrobot75: the authors' episode length

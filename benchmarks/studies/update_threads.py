@@ -3,7 +3,7 @@
 Run it with the other core busy and idle to see whether two threads help or collapse on a shared 2-core machine.
 Writes ``benchmarks/results/update_cost/update_threads.json`` (appends one record per run: load average, times, medians).
 
-Usage: ``python -m benchmarks.update_threads [--repeats 5] [--episodes 10]``
+Usage: ``python -m benchmarks.studies.update_threads [--repeats 5] [--episodes 10]``
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch as th
 
-from benchmarks.task import git_state
-from benchmarks.update_cost import RESULTS, load_denfac, make_buffers
+from benchmarks.runner.task import git_state
+from benchmarks.studies.update_cost import RESULTS, load_denfac, make_buffers
 
 
 def main(argv: list[str] | None = None) -> None:

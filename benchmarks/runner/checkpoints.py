@@ -3,7 +3,7 @@
 :class:`RunCheckpoint` saves the run (SB3's own files and the run's records so far) into one folder per cell
 (:func:`checkpoint_folder`); :func:`resume_or_start` gives the run back its model, replay buffer and normalisation
 statistics from there (:func:`resume_model`) and its callbacks their records (:func:`restore_callbacks`), or starts it
-afresh where the checkpoint does not fit. ``benchmarks.task.run_one`` uses them.
+afresh where the checkpoint does not fit. ``benchmarks.runner.task.run_one`` uses them.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class RunCheckpoint(BaseCallback):
     then removes the old ones: a kill at any point leaves the previous checkpoint or the new one whole."""
 
     def __init__(self, folder: Path, every: float, state: Any, clock: Any = None) -> None:
-        """``state()``: the run's records to save beside the model; ``clock``: a ``benchmarks.task.RunClock``, whose
+        """``state()``: the run's records to save beside the model; ``clock``: a ``benchmarks.runner.task.RunClock``, whose
         ``checkpoint_cpu_time`` counts the saves' CPU seconds (left out of the run's)."""
         super().__init__()
         self.folder, self.every, self.state, self.clock = Path(folder), every, state, clock
