@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import threading
+import time
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -15,7 +17,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from sb3_denfac import DENFAC, SoftDENFAC
 from sb3_denfac.common.callbacks import UpdateStatsCallback
-from sb3_denfac.common.learner import THREAD_NAME
+from sb3_denfac.common.learner import THREAD_NAME, BackgroundLearner
 
 #: K_e = ceil(rho n / critic_steps) = n, the episode's length: the updates say which episodes they were for
 PER_STEP = dict(
@@ -122,6 +124,79 @@ def test_async_update_save_during_learn_loads(tmp_path) -> None:
     assert loaded.async_update is True
     loaded.learn(20)
     assert not _learner_threads()
+
+
+def test_async_update_plays_its_snapshots_between_fitted_iterations() -> None:
+    """An update that outlasts its episode publishes its progress: after each fitted iteration the learner offers a
+    copy of the policy fitted so far, and the next env step plays it (model.policy changes without a recorded update).
+    Before the snapshots, the policy from before the running update played until it ended."""
+    changes: list[tuple[int, int]] = []  # (updates recorded before, after) at each step whose policy is new
+
+    class Slow(BaseCallback):  # 5 ms per env step while an update runs: the update (20 iterations) spans many steps
+        last: tuple[int, int] | None = None
+
+        def _on_step(self) -> bool:
+            learner = self.model._learner
+            if learner is not None and learner.busy:
+                time.sleep(0.005)
+            now = (id(self.model.policy), self.model._n_updates)
+            if self.last is not None and now[0] != self.last[0]:
+                changes.append((self.last[1], now[1]))
+            self.last = now
+            return True
+
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps=20), seed=0, async_update=True, **PER_STEP)
+    model.learn(100, callback=Slow())
+    assert model._n_updates == 5  # every episode still gets its update, counted once, when it ends
+    snapshots = [change for change in changes if change[0] == change[1]]
+    assert snapshots, f"no snapshot played between fitted iterations: {changes}"
+    assert not _learner_threads()
+
+
+def test_async_update_with_more_than_two_envs_warns_once_and_says_why() -> None:
+    """With 4 envs on Reacher-v5 the asynchronous update lost even with its snapshots (research/several_envs)."""
+    env = DummyVecEnv([lambda: gym.make("Pendulum-v1", max_episode_steps=5) for _ in range(3)])
+    model = DENFAC("MlpPolicy", env, seed=0, async_update=True, **PER_STEP)
+    with pytest.warns(UserWarning, match=r"async_update=True with 3 envs.*back to back.*action bounds"):
+        model.learn(15)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model.learn(15)  # once per model
+        DENFAC("MlpPolicy", _two_lengths(), seed=0, async_update=True, **PER_STEP).learn(30)  # 2 envs: held
+    assert not _learner_threads()
+
+
+def test_offer_snapshot_outside_an_asynchronous_update_does_nothing() -> None:
+    """The update in place (the synchronous path) offers nothing and calls no flush: its arithmetic is unchanged."""
+    model = DENFAC("MlpPolicy", gym.make("Pendulum-v1", max_episode_steps=20), seed=0, **PER_STEP)
+    flushed: list[int] = []
+    model._offer_snapshot(model.policy, lambda: flushed.append(1))
+    assert flushed == [] and model._learner is None
+
+
+def test_background_learner_hands_over_the_newest_snapshot_and_drops_it_with_the_result() -> None:
+    learner = BackgroundLearner()
+    try:
+        started, release = threading.Event(), threading.Event()
+        inside: list[bool] = []
+
+        def job() -> str:
+            inside.append(learner.inside_job())
+            learner.offer("first")
+            learner.offer("second")  # replaces the one not taken
+            started.set()
+            release.wait(5)
+            learner.offer("third")
+            return "done"
+
+        learner.submit(job)
+        assert started.wait(5) and not learner.inside_job()  # the caller is not the learner thread
+        assert learner.take_offer() == "second" and learner.take_offer() is None
+        release.set()
+        assert learner.result() == "done" and learner.take_offer() is None  # the result supersedes "third"
+        assert inside == [True]
+    finally:
+        learner.close()
 
 
 def _async_pendulum_run(algo, seed: int, episodes: int) -> tuple[float, float]:

@@ -25,22 +25,33 @@ comes on an env without a time limit. Algorithm 1 updates after every episode, w
   which no thread writes. The first env step after the update ends publishes it: the copy becomes ``model.policy``,
   and the update is recorded (logging keys, ``last_update``), in the calling thread.
 
-  What changes against the update in place: the first steps of an episode are played by the previous policy; an
-  episode's end waits for the update still running, if any (at most one is in flight, and every finished episode
-  still gets its update); the learner's random draws interleave with the env's, so runs are not reproducible from the
-  seed. ``learn`` returns after the last update is published. On an exception (``KeyboardInterrupt`` included) it
-  waits for the running update, publishes it, and ends the thread before the exception propagates. ``save`` during
-  ``learn`` writes the last published policy.
+  The update also publishes its progress: after each fitted iteration the learner offers a copy of the policy as
+  fitted so far (:meth:`_offer_snapshot`, which the subclass's fit calls), and the next env step plays the newest one
+  (it becomes ``model.policy``; nothing is recorded until the update ends). Without these snapshots an update that
+  outlasts an episode left that whole episode to the policy from before the update (the newest data then came from
+  the policy before last, while the update fitted the actor a step further): on Reacher-v5 the critic never saw the
+  actions the actor moved to before it moved further, and the actor ran off to the action bounds
+  (research/several_envs/README.md, "The asynchronous update's lag on Reacher").
+
+  What changes against the update in place: the first steps of an episode are played by the previous policy and by
+  the running update's snapshots; an episode's end waits for the update still running, if any (at most one is in
+  flight, and every finished episode still gets its update; the next update starts from the finished one, never from
+  a snapshot); the learner's random draws interleave with the env's, so runs are not reproducible from the seed.
+  ``learn`` returns after the last update is published. On an exception (``KeyboardInterrupt`` included) it waits for
+  the running update, publishes it, and ends the thread before the exception propagates. ``save`` during ``learn``
+  writes the last published policy (possibly a snapshot inside an update).
 
 ``learn`` runs with ``torch_threads`` torch threads (:mod:`~sb3_denfac.common.threads`). A subclass provides
 :meth:`_explore`, :meth:`_fit_all`, :meth:`_record` and :meth:`_create_aliases`, calls :meth:`_run_updates` from its
-``train`` with what :meth:`_finished_episodes` hands it, and uses a replay buffer with the :class:`EpisodicBuffer`
-methods.
+``train`` with what :meth:`_finished_episodes` hands it and :meth:`_offer_snapshot` between its fitted iterations,
+and uses a replay buffer with the :class:`EpisodicBuffer` methods.
 """
 
 from __future__ import annotations
 
 import copy
+import warnings
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -55,6 +66,10 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_denfac.common.exploration import warm_up_actions
 from sb3_denfac.common.learner import BackgroundLearner
 from sb3_denfac.common.threads import DEFAULT_TORCH_THREADS, torch_threads
+
+#: the most envs with which the asynchronous update held the return where it was measured (Reacher-v5, 2 envs; with
+#: 4 it lost: :meth:`EpisodicOffPolicyAlgorithm.learn` warns beyond this)
+ASYNC_ENVS_MEASURED = 2
 
 
 class EpisodicBuffer(Protocol):
@@ -131,6 +146,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         with torch_threads(self.torch_threads):
             if not self.async_update:
                 return super().learn(*arguments)  # type: ignore[return-value]
+            self._warn_async_with_several_envs()
             self._learner = BackgroundLearner()
             try:
                 return super().learn(*arguments)  # type: ignore[return-value]
@@ -140,6 +156,21 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
                 finally:
                     self._learner.close()
                     self._learner = None
+
+    def _warn_async_with_several_envs(self) -> None:
+        """Warn, once per model, that the asynchronous update with more than 2 envs lost where it was measured."""
+        if self.n_envs <= ASYNC_ENVS_MEASURED or getattr(self, "_warned_async_envs", False):
+            return
+        self._warned_async_envs = True
+        warnings.warn(
+            f"async_update=True with {self.n_envs} envs: the updates of the episodes that end together run back to back "
+            "on one policy's data, and the asynchronous update plays the next episodes with the policy from before "
+            f"them; on Reacher-v5 with 4 envs the actor ran off to the action bounds (-107 against -4 to -23 with the "
+            f"update in place), with up to {ASYNC_ENVS_MEASURED} envs it held (research/several_envs/README.md). "
+            "Compare with async_update=False, or use fewer envs",
+            UserWarning,
+            stacklevel=3,
+        )
 
     def collect_rollouts(
         self,
@@ -229,16 +260,36 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
     def _fit_in_background(self, policy: Any, data: Any, plan: tuple[Any, ...]) -> tuple[Any, Any]:
         return policy, self._fit_all(policy, data, *plan)
 
+    def _offer_snapshot(self, policy: Any, flush: Callable[[], None] | None = None) -> None:
+        """Between two fitted iterations of :meth:`_fit_all` on ``policy``: inside an asynchronous ``learn``, on the
+        learner thread, a copy of ``policy`` as fitted so far (``flush`` first: what the fit keeps outside the modules
+        written back into them) is handed to the env steps, which play it from the next one (module docstring).
+        Anywhere else (the update in place) nothing: the update's arithmetic is the same either way."""
+        learner = self._learner
+        if learner is None or not learner.inside_job():
+            return
+        if flush is not None:
+            flush()
+        learner.offer(copy.deepcopy(policy))
+
     def _publish(self, wait: bool) -> None:
         """Make the learner's finished update (``wait``: or the running one, once it ends) the model's policy, and
-        record it; nothing if there is none."""
+        record it; else the newest snapshot the running update offered becomes the model's policy (not recorded);
+        nothing if there is neither."""
         learner = self._learner
-        if learner is None or not (learner.ready() or (wait and learner.busy)):
+        if learner is None:
             return
-        policy, fits = learner.result()
-        self.policy = policy
-        self._create_aliases()
-        self._record(fits)
+        if learner.ready() or (wait and learner.busy):
+            policy, fits = learner.result()
+            self.policy = policy
+            self._create_aliases()
+            self._record(fits)
+            return
+        snapshot = learner.take_offer()
+        if snapshot is not None:
+            snapshot.set_training_mode(False)
+            self.policy = snapshot
+            self._create_aliases()
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_budget", "_episode_steps", "_finished", "_learner"]
+        return [*super()._excluded_save_params(), "_budget", "_episode_steps", "_finished", "_learner", "_warned_async_envs"]

@@ -1,9 +1,10 @@
 """The background learner of the asynchronous update (``async_update=True``): one thread that runs one update job
 at a time, beside the env steps of the calling thread (:mod:`~sb3_denfac.common.episodic`, "The asynchronous
-update")."""
+update"), and hands the caller a snapshot of the job's progress (:meth:`BackgroundLearner.offer`) before its end."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
@@ -14,11 +15,15 @@ THREAD_NAME = "denfac-learner"
 
 class BackgroundLearner:
     """One learner thread running one job at a time (:mod:`concurrent.futures`); an exception in the job is raised in
-    the caller by :meth:`result`."""
+    the caller by :meth:`result`. While a job runs it may :meth:`offer` snapshots of its progress, which the caller
+    takes with :meth:`take_offer` (the newest only; :meth:`result` drops the one not taken)."""
 
     def __init__(self) -> None:
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=THREAD_NAME)
         self._job: Future[Any] | None = None
+        self._lock = threading.Lock()
+        self._offered: Any = None
+        self._inside = threading.local()  # inside_job: set in the learner thread while a job runs
 
     @property
     def busy(self) -> bool:
@@ -29,18 +34,49 @@ class BackgroundLearner:
         """A job was submitted and has ended (its result can be taken without waiting)."""
         return self._job is not None and self._job.done()
 
+    def inside_job(self) -> bool:
+        """Whether the calling thread is the learner thread, running a job."""
+        return getattr(self._inside, "job", False)
+
     def submit(self, job: Callable[..., Any], *args: Any) -> None:
         if self._job is not None:
             raise RuntimeError("the learner is still busy: take the result of its job first")
-        self._job = self._executor.submit(job, *args)
+        self._take()
+
+        def run() -> Any:
+            self._inside.job = True
+            try:
+                return job(*args)
+            finally:
+                self._inside.job = False
+
+        self._job = self._executor.submit(run)
+
+    def offer(self, snapshot: Any) -> None:
+        """From the running job: ``snapshot`` replaces the one offered before, if the caller has not taken it."""
+        with self._lock:
+            self._offered = snapshot
+
+    def take_offer(self) -> Any:
+        """The newest snapshot the running job offered and nobody took yet (None: none)."""
+        return self._take()
+
+    def _take(self) -> Any:
+        with self._lock:
+            snapshot, self._offered = self._offered, None
+        return snapshot
 
     def result(self) -> Any:
-        """The job's result, waiting for it to end; the learner is then free."""
+        """The job's result, waiting for it to end; the learner is then free (a snapshot not taken is dropped)."""
         assert self._job is not None, "no job submitted"
         job, self._job = self._job, None
-        return job.result()
+        try:
+            return job.result()
+        finally:
+            self._take()
 
     def close(self) -> None:
         """Wait for the running job, if any (its result is dropped), and end the thread."""
         self._executor.shutdown(wait=True)
         self._job = None
+        self._take()

@@ -328,6 +328,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
                 actor_objective = updater.fit_actor(obs)
             else:
                 actor_objective = updater.fit_actor(take(obs, sample.actor_rows), sample.actor_batches)
+            self._offer_snapshot(updater.policy, updater.finish)  # async_update: the update so far plays next
         updater.finish()
         seconds = time.perf_counter() - start
         n = n_rows(rewards)

@@ -18,7 +18,9 @@
 - ``fit_actor(s, batches)``: G Adam steps ascending 1/N sum Q_1(s_t, pi(s_t)) (eq. 5), with inverting gradients if asked
   (with ``actor_proximal`` > 0: the proximal loss towards the actor at the start of the update, :mod:`~.options`);
   :class:`~sb3_denfac.soft_denfac.SoftDENFAC`'s updaters fit SAC's actor and temperature instead;
-- ``finish()``: once at the end, whatever the implementation keeps outside the modules is written back.
+- ``finish()``: at the end, whatever the implementation keeps outside the modules is written back (idempotent: the
+  asynchronous update also calls it before each snapshot between fitted iterations, and its arithmetic goes on
+  unchanged).
 
 Two implementations compute the same update up to float rounding (tested): :class:`AutogradUpdater` (autograd on the
 policy's modules and ``torch.optim.Adam``; the reference) and :class:`~sb3_denfac.denfac.fast.FastUpdater`
@@ -223,7 +225,7 @@ class Updater(ABC):
         (as :meth:`fit_critic`); returns the last objective."""
 
     def finish(self) -> None:  # noqa: B027 (optional hook: the autograd updater keeps nothing outside the modules)
-        """Called once after the K fitted iterations."""
+        """Called after the K fitted iterations, and before each snapshot of the asynchronous update (idempotent)."""
 
 
 class AutogradUpdater(Updater):
