@@ -29,7 +29,7 @@ def test_runner_runs_as_a_module_from_the_repository_root():
     assert "--suite" in result.stdout and "matched" in result.stdout
 
 
-def test_run_and_analysis_command_lines(tmp_path, monkeypatch):
+def test_run_and_analysis_command_lines(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(stats, "REPS", 50)
     args = ["--algos", "denfac_default", "cmaes", "--envs", "pendulum", "--seeds", "0", "1", "--episodes", "2"]
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
@@ -38,14 +38,17 @@ def test_run_and_analysis_command_lines(tmp_path, monkeypatch):
     assert (tmp_path / "generalisation.md").exists() and not (tmp_path / "all_runs.md").exists()
     with pytest.raises(SystemExit):
         analysis.main(["--results", str(tmp_path), "--suites", "figure"])
-    analysis.main(["--results", str(tmp_path)])
+    capsys.readouterr()
+    analysis.main(["--results", str(tmp_path)])  # every report: figure3, generalisation, matched, all_runs
+    assert {"figure3.md", "matched.md", "all_runs.md"} <= {p.name for p in tmp_path.glob("*.md")}
     assert "DENFAC (default)" in (tmp_path / "all_runs.md").read_text()
+    assert capsys.readouterr().out.startswith("wrote ")  # the files written, not their tables
 
 
 def test_a_run_of_one_suite_writes_its_report_alone_and_prints_no_table(tmp_path, monkeypatch, capsys):
     """The cell (DENFAC's default, Pendulum, seed 0) is in ``figure3``, ``generalisation`` and ``matched``: a run of
     ``generalisation`` writes ``generalisation.md`` and no other suite's report, and the console gets a line per cell
-    and the summary, no markdown; ``python -m benchmarks.reports.analysis`` then writes every report."""
+    and the summary, no markdown (``python -m benchmarks.reports.analysis`` writes every report: the test above)."""
     monkeypatch.setattr(stats, "REPS", 50)
     args = ["--suite", "generalisation", "--algos", "denfac_default", "--envs", "pendulum", "--seeds", "0"]
     assert runner.main([*args, "--episodes", "2", "--results", str(tmp_path), "--workers", "0"]) == 0
@@ -55,9 +58,6 @@ def test_a_run_of_one_suite_writes_its_report_alone_and_prints_no_table(tmp_path
     assert len(lines) == 4 and not [line for line in lines if line.startswith(("|", "#", "!["))], lines
     assert "[1/1] done denfac_default pendulum seed 0" in lines[1]
     assert lines[2:] == [f"report: {tmp_path / 'generalisation.md'}", "finished: 1 done, 0 skipped, 0 failed"]
-    analysis.main(["--results", str(tmp_path)])
-    assert {"figure3.md", "matched.md", "all_runs.md"} <= {p.name for p in tmp_path.glob("*.md")}
-    assert capsys.readouterr().out.count("\n") == 1  # the files written, not their tables
 
 
 DOCUMENTS = ["README.md", "benchmarks/README.md", *(f"docs/{p.name}" for p in sorted((REPO / "docs").glob("*.md")))]
