@@ -101,6 +101,55 @@ def test_her_all_samples_are_the_transitions_then_relabelled_copies() -> None:
     assert (data.rewards[30:] == 0).float().mean() > (data.rewards[:30] == 0).float().mean()  # goals achieved by design
 
 
+def test_her_draws_new_goals_for_every_fitted_iteration(monkeypatch) -> None:
+    """The relabelled copies' goals are drawn anew for each fitted iteration of an update (not once per update): a
+    redraw keeps the stored transitions and the copies' states, gives the copies other goals with the env's rewards
+    for them, and the fit asks for one before every iteration but the first."""
+    model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)  # 3 finished episodes
+    data = model.replay_buffer.all_samples()
+    obs, next_obs, rewards = data.redraw_goals()
+    first, again = data.observations["desired_goal"][30:], obs["desired_goal"][30:]
+    assert not th.equal(first, again)  # other goals (the draws of 120 copies coincide with probability ~0)
+    assert th.equal(obs["desired_goal"][:30], data.observations["desired_goal"][:30]) and th.equal(
+        rewards[:30], data.rewards[:30]
+    )
+    assert th.equal(obs["observation"], data.observations["observation"]) and th.equal(
+        next_obs["desired_goal"], obs["desired_goal"]
+    )
+    achieved = next_obs["achieved_goal"][30:].numpy()
+    # exact: the env's reward function on the same goals
+    np.testing.assert_array_equal(rewards[30:, 0].numpy(), PointReach().compute_reward(achieved, again.numpy(), {}))
+    draws = []
+    all_samples = DENFACHerReplayBuffer.all_samples
+
+    def counted(self, env=None):
+        samples = all_samples(self, env)
+        redraw = samples.redraw_goals
+        samples.redraw_goals = lambda: draws.append(1) or redraw()
+        return samples
+
+    monkeypatch.setattr(DENFACHerReplayBuffer, "all_samples", counted)
+    model._update(3)
+    assert len(draws) == 2  # iterations 2 and 3; the first reads the set all_samples drew
+
+
+def test_the_plain_call_on_a_goal_env_with_her_takes_the_goals_preset() -> None:
+    """``DENFAC("MultiInputPolicy", goal_env, replay_buffer_class=HerReplayBuffer)`` takes presets.GOALS' values for
+    the settings it is not given; a value given is kept; without HER (or without goals) the library defaults."""
+    assert presets.PRESETS["GOALS"] is presets.GOALS and presets.GOALS["replay_buffer_class"] is HerReplayBuffer
+    plain = DENFAC("MultiInputPolicy", point_reach(), replay_buffer_class=HerReplayBuffer)
+    settings = ("gamma", "update_to_data_ratio", "n_fitted_iterations", "actor_proximal")
+    assert {key: getattr(plain, key) for key in settings} == {key: presets.GOALS[key] for key in settings}
+    given = DENFAC("MultiInputPolicy", point_reach(), 1e-3, replay_buffer_class=HerReplayBuffer, gamma=0.99)
+    assert given.gamma == 0.99 and given.actor_proximal == 0.0 and given.goal_settings_taken == sorted(settings[1:])
+    without = DENFAC("MultiInputPolicy", point_reach())
+    assert (without.gamma, without.update_to_data_ratio, without.actor_proximal) == (0.99, None, 1.0)
+    soft = SoftDENFAC("MultiInputPolicy", point_reach(), replay_buffer_class=HerReplayBuffer)
+    assert soft.gamma == 0.95 and "actor_proximal" not in soft.goal_settings_taken  # SAC's actor has no anchor
+    model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **presets.GOALS).learn(20)
+    assert model.gamma == 0.95 and isinstance(model.replay_buffer, DENFACHerReplayBuffer)
+
+
 def test_multi_input_policy_saves_loads_and_takes_the_fast_update(tmp_path) -> None:
     model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **SMALL, **HER).learn(30)
     assert isinstance(model.make_updater(), FastUpdater)  # a Dict of 1-D Boxes: CombinedExtractor concatenates them

@@ -22,7 +22,7 @@ EpisodicOffPolicyAlgorithm)``). It checks:
 from __future__ import annotations
 
 import inspect
-from typing import Any, SupportsFloat
+from typing import Any, Protocol, SupportsFloat, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
@@ -190,6 +190,18 @@ def check_preset_keywords(cls: type, keywords: dict[str, Any]) -> None:
             raise TypeError(message)
 
 
+@runtime_checkable
+class InputChecksHost(Protocol):
+    """What :class:`InputChecksMixin` needs from the algorithm it is mixed into (an SB3 ``BaseAlgorithm``)."""
+
+    policy_aliases: dict[str, type[BasePolicy]]
+    env: VecEnv | None
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False) -> Any: ...
+
+    def _setup_learn(self, *args: Any, **kwargs: Any) -> Any: ...
+
+
 class InputChecksMixin:
     """All checks of this module (module docstring); put it first in an algorithm's bases.
 
@@ -205,7 +217,12 @@ class InputChecksMixin:
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Any:
         check_preset_keywords(cls, kwargs)  # before Python binds the arguments (its TypeError would name one key)
-        return super().__new__(cls)
+        model = super().__new__(cls)
+        # the constructor arguments the caller gave (positional ones by name), which settings chosen from the env leave
+        # alone (DENFAC's goal settings, :func:`~sb3_denfac.denfac.her.take_goal_settings`)
+        positional = [name for name in inspect.signature(cls.__init__).parameters if name != "self"][: len(args)]  # type: ignore[misc]
+        model._given_arguments = frozenset(positional) | frozenset(kwargs)
+        return model
 
     def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
         # SB3 answers "MultiInputPolicy" with "Policy MultiInputPolicy unknown": this names the cause instead

@@ -22,7 +22,7 @@ from sb3_denfac.common.exploration import behaviour_log_prob, truncated_gaussian
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
 from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
 from sb3_denfac.denfac.buffers import BehaviourMeansBuffer, DENFACReplayBufferSamples, check_holds_one_episode, n_rows, take
-from sb3_denfac.denfac.her import replay_buffer_class_for
+from sb3_denfac.denfac.her import replay_buffer_class_for, take_goal_settings
 from sb3_denfac.denfac.options import FittedIterations, bootstrap_range, clip_bootstrap, fitted_iterations
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
 from sb3_denfac.denfac.settings import store_settings, warn_ignored_settings
@@ -55,7 +55,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
     :param batch_size: an int = one uniform mini-batch of that size (drawn with replacement) per critic/actor step;
         None = full batch (paper)
-    :param gamma: discount factor gamma
+    :param gamma: discount factor gamma (on a goal env with HER, not given: ``presets.GOALS``' 0.95; below)
     :param n_fitted_iterations: K, fitted iterations per update (paper: 10); with ``update_to_data_ratio``, the cap on
         K_e, or its range ``(K_min, K_max)`` (K_max None: no cap; None alone: ``(1, None)``)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)
@@ -106,7 +106,10 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         runs between episodes, reproducible from the seed)
     :param replay_buffer_class: D's class: None (:class:`~.buffers.DENFACReplayBuffer`, or
         :class:`~.buffers.DENFACDictReplayBuffer` for Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals:
-        :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them
+        :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them. With HER on a goal env (a Dict
+        observation with ``achieved_goal`` and ``desired_goal``), the settings not given take ``presets.GOALS``'
+        values (gamma 0.95, the compute dial, no proximal anchor: why, in :mod:`~.presets`); the model's
+        ``goal_settings_taken`` names them
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
@@ -179,7 +182,8 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         torch_threads: int | None = 1,
         _init_setup_model: bool = True,
     ):
-        learning_rate = store_settings(self, locals())  # every setting checked and stored, one place (settings.py)
+        arguments = dict(locals())
+        learning_rate = store_settings(self, arguments)  # every setting checked and stored, one place (settings.py)
         if not _init_setup_model:  # SB3's load: the attributes a file saved are written over these next
             denfac_attributes_of_old_files(self)
         super().__init__(
@@ -208,6 +212,8 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             support_multi_env=True,  # checked below with a clear message
         )
         check_holds_one_episode(self.env, self.buffer_size)
+        if _init_setup_model:  # a goal env with HER: presets.GOALS for the settings not given (her.py)
+            self.goal_settings_taken = take_goal_settings(self, arguments, store_settings)
         record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:
             warn_ignored_settings(self)
@@ -297,7 +303,10 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         log_prob_b = behaviour_log_prob(actions, data.behaviour_means, self.sigma)  # type: ignore[arg-type]
         bounds = bootstrap_range(rewards, self.gamma) if self.bootstrap_bounds else None
         critic_loss = actor_objective = th.zeros(())
-        for _ in range(n_iterations):
+        redraw_goals = getattr(data, "redraw_goals", None)  # HER: new goals for the relabelled copies (her.py)
+        for k in range(n_iterations):
+            if redraw_goals is not None and k > 0:  # each fitted iteration its own goals; the rest of D as it is
+                obs, next_obs, rewards = redraw_goals()
             # With mini-batches, the iteration's batches are drawn first: q_k and c are then needed on their rows only
             # (the same values as over all of D). ``rows`` None: the whole buffer.
             sample = updater.iteration_sample(n_rows(rewards))

@@ -19,6 +19,8 @@ import copy
 from collections.abc import Collection
 from typing import Any
 
+from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
+
 #: Constructor arguments that turn the default DENFAC into the paper's Algorithm 1 (section 4, Figure 5).
 PAPER: dict[str, Any] = {
     "learning_rate": 0.1,
@@ -57,6 +59,28 @@ DATA_EFFICIENT: dict[str, Any] = {
 }
 
 
+#: Goal-conditioned tasks with hindsight goals (Dict observations with ``achieved_goal`` and ``desired_goal``, SB3's
+#: ``HerReplayBuffer``; the robotics suite's PandaReach-v3 entry): ``DENFAC("MultiInputPolicy", env, **GOALS)``. The
+#: plain call ``DENFAC("MultiInputPolicy", goal_env, replay_buffer_class=HerReplayBuffer)`` takes the same values for
+#: the settings it is not given (``sb3_denfac.denfac.her.take_goal_settings``). Why each value (docs/results.md,
+#: goal-conditioned tasks): ``gamma`` 0.95, a horizon 1 / (1 - gamma) of 20 steps, inside the 50-step episodes of the
+#: goal suites (Fetch, panda-gym), where the sparse reward is -1 per step off the goal: the values stay within -20,
+#: about what an episode that never reaches its goal returns, where 0.99 asks the critic for -100 from a time-limit
+#: bootstrap that no episode shows (the RL Zoo's HER entries take 0.95 too); the compute dial
+#: (``update_to_data_ratio`` 10, K_e in 1-10) because a goal env ends an episode at the goal: a policy that reaches
+#: goals plays episodes of a few steps, and the default's K = 10 fitted iterations after each made the update's cost
+#: per env step tenfold; ``actor_proximal`` 0 because with such short episodes and K_e = 1-2 the anchor held each
+#: update's actor near the last one's. Everything else is the default's (``n_sampled_goal`` 4, "future" goals: SB3's
+#: and the HER paper's).
+GOALS: dict[str, Any] = {
+    "replay_buffer_class": HerReplayBuffer,
+    "gamma": 0.95,
+    "update_to_data_ratio": 10.0,
+    "n_fitted_iterations": (1, 10),
+    "actor_proximal": 0.0,
+}
+
+
 def data_efficient(**overrides: Any) -> dict[str, Any]:
     """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=2`` (half the
     compute)."""
@@ -81,7 +105,7 @@ def paper(**overrides: Any) -> dict[str, Any]:
 
 
 #: The presets by name (``presets.<NAME>``): constructor arguments of DENFAC.
-PRESETS: dict[str, dict[str, Any]] = {"PAPER": PAPER, "DATA_EFFICIENT": DATA_EFFICIENT}
+PRESETS: dict[str, dict[str, Any]] = {"PAPER": PAPER, "DATA_EFFICIENT": DATA_EFFICIENT, "GOALS": GOALS}
 
 
 def foreign_preset_message(algorithm: str, keywords: Collection[str], not_taken: Collection[str]) -> str | None:
