@@ -1,0 +1,116 @@
+"""HER's goal draws and the plain call on PandaReach-v3: episodes to 90% of 20 test goals, and CPU seconds.
+
+    python -m research.robotics.her_relabel VARIANT SEED [SEED ...]
+
+Variants (each DENFAC + SB3's ``HerReplayBuffer``, ``n_sampled_goal`` 4, "future" goals):
+
+- ``entry_once``: the zoo entry (gamma 0.95, ``update_to_data_ratio`` 10, ``n_fitted_iterations`` (1, 10),
+  ``actor_proximal`` 0), the relabelled copies' goals drawn once per update (the buffer's ``redraw_goals`` removed);
+- ``entry``: the zoo entry, goals drawn anew at every fitted iteration (the library's relabelling);
+- ``entry_goals8``: ``entry`` with ``n_sampled_goal`` 8 (twice the goals per transition in each draw);
+- ``plain``: ``DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer)``, nothing else (on a goal env
+  with HER it takes ``presets.GOALS`` for the settings not given: the entry's);
+- ``plain_gamma``: the plain call with ``gamma=0.95``.
+
+The robotics suite's protocol: training goals seeded (every reset of the training env carries a seed: ``SEED * 1000``
+and up), 20 deterministic test episodes on goals of their own (seeds 10,000 and up, the same at every evaluation)
+every 5 training episodes; a run stops at the first evaluation at 90% or after 60 episodes. One JSON line per run on
+stdout: the evaluations (episode, share of goals reached), the episode of the first at 90% (None: not within 60) and
+the CPU seconds of training (process time inside ``learn``, the evaluations left out) to there. Results: README.md
+beside this file.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+import panda_gym  # noqa: F401  (registers PandaReach-v3)
+from stable_baselines3 import HerReplayBuffer
+from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+from sb3_denfac import DENFAC
+from sb3_denfac.denfac import DENFACHerReplayBuffer
+
+MAX_EPISODES, EVERY, TEST_GOALS = 60, 5, 20
+HER_KWARGS = dict(goal_selection_strategy="future", n_sampled_goal=4)
+ENTRY = dict(gamma=0.95, update_to_data_ratio=10, n_fitted_iterations=(1, 10), actor_proximal=0.0)
+
+
+class GoalsOncePerUpdate(DENFACHerReplayBuffer):
+    """The relabelling before fresh goals per fitted iteration: one goal set per update."""
+
+    def all_samples(self, env=None):
+        samples = super().all_samples(env)
+        if hasattr(samples, "redraw_goals"):
+            samples.redraw_goals = None
+        return samples
+
+
+class SeededResets(gym.Wrapper):
+    """Passes a seed to every reset (``first``, ``first + 1``...): panda-gym draws each reset's goal from the OS's
+    entropy where the reset has no seed."""
+
+    def __init__(self, env: gym.Env, first: int) -> None:
+        super().__init__(env)
+        self.next_seed = first
+
+    def reset(self, *, seed=None, options=None):
+        self.next_seed = (self.next_seed if seed is None else seed) + 1
+        return self.env.reset(seed=self.next_seed - 1, options=options)
+
+
+def success(model: DENFAC) -> float:
+    """The share of the 20 deterministic test episodes that end at the goal (the same goals at every call)."""
+    env = SeededResets(gym.make("PandaReach-v3"), first=10_000)
+    reached = []
+    for _ in range(TEST_GOALS):
+        obs, _ = env.reset()
+        done, info = False, {}
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        reached.append(float(info.get("is_success", False)))
+    env.close()
+    return float(np.mean(reached))
+
+
+def make(variant: str, seed: int) -> DENFAC:
+    env = SeededResets(gym.make("PandaReach-v3"), first=seed * 1000)
+    if variant == "plain":
+        return DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, seed=seed)
+    if variant == "plain_gamma":
+        return DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, gamma=0.95, seed=seed)
+    buffer = {"entry": HerReplayBuffer, "entry_once": GoalsOncePerUpdate, "entry_goals8": HerReplayBuffer}[variant]
+    her = {**HER_KWARGS, "n_sampled_goal": 8} if variant == "entry_goals8" else HER_KWARGS
+    return DENFAC("MultiInputPolicy", env, replay_buffer_class=buffer, replay_buffer_kwargs=her, seed=seed, **ENTRY)
+
+
+def run(variant: str, seed: int) -> dict:
+    model = make(variant, seed)
+    evaluations, cpu, reached = [], 0.0, None
+    for episode in range(EVERY, MAX_EPISODES + 1, EVERY):
+        start = time.process_time()
+        model.learn(10**6, callback=StopTrainingOnMaxEpisodes(EVERY), reset_num_timesteps=episode == EVERY)
+        cpu += time.process_time() - start
+        evaluations.append((episode, success(model)))
+        if evaluations[-1][1] >= 0.9:
+            reached = episode
+            break
+    settings = dict(gamma=model.gamma, n_fitted_iterations=model.n_fitted_iterations, dial=model.update_to_data_ratio)
+    settings["actor_proximal"] = model.actor_proximal
+    return dict(variant=variant, seed=seed, episodes_to_90=reached, cpu_s=round(cpu, 1), evaluations=evaluations, **settings)
+
+
+def main() -> None:
+    variant, seeds = sys.argv[1], [int(s) for s in sys.argv[2:]]
+    for seed in seeds:
+        print(json.dumps(run(variant, seed)), flush=True)
+
+
+if __name__ == "__main__":
+    main()
