@@ -11,6 +11,9 @@ import stable_baselines3
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
 from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.common.callbacks import ProgressBarHost, ProgressBarMixin
+from sb3_denfac.common.checks import InputChecksHost, InputChecksMixin
+from sb3_denfac.common.learning_rates import ActorCriticRatesMixin, RatesHost
 
 ROOT = Path(__file__).parents[1]
 PAGE = (ROOT / "docs" / "architecture.md").read_text()
@@ -80,3 +83,14 @@ def test_below_denfac_each_sb3_method_is_overridden_once(algorithm: type) -> Non
     table = PAGE.split("Below DENFAC, each SB3 method is overridden once:", 1)[1].split("\n\n", 2)[1]
     listed = re.findall(r"^\| `(\w+)` \|", table, re.MULTILINE)
     assert sorted(listed) == sorted(overrides)
+
+
+@pytest.mark.parametrize("name", ["denfac", "soft_denfac", "nfac", "cacla", "ddpg", "cmaes"])
+def test_every_algorithm_provides_what_its_mixins_need(name: str, make_model) -> None:
+    """Each generic mixin states what it needs from its host as a Protocol; every algorithm that uses it provides it."""
+    model = make_model(name).learn(1)  # SB3 sets the logger up in learn
+    hosts = {InputChecksMixin: InputChecksHost, ProgressBarMixin: ProgressBarHost, ActorCriticRatesMixin: RatesHost}
+    used = [host for mixin, host in hosts.items() if isinstance(model, mixin)]
+    assert used, type(model).__mro__
+    for host in used:
+        assert isinstance(model, host), host.__name__

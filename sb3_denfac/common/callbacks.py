@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
@@ -204,6 +204,13 @@ class ProgressBarCallback(SB3ProgressBarCallback):
             return super()._on_step()
         self.pbar.update(int(np.sum(self.locals["dones"])))
         return True
+
+
+@runtime_checkable
+class ProgressBarHost(Protocol):
+    """What :class:`ProgressBarMixin` needs from the algorithm it is mixed into: SB3's ``_init_callback``."""
+
+    def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback: ...
 
 
 class ProgressBarMixin:

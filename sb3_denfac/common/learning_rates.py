@@ -12,12 +12,24 @@ them to the two optimizers (SB3's ``_update_learning_rate`` applies the single `
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.common.utils import FloatSchedule, update_learning_rate
 
 NETWORKS = ("actor", "critic")
+
+
+@runtime_checkable
+class RatesHost(Protocol):
+    """What :class:`ActorCriticRatesMixin` needs from the algorithm it is mixed into."""
+
+    learning_rate: float | Schedule
+    actor_learning_rate: float | Schedule | None
+    critic_learning_rate: float | Schedule | None
+    policy: Any  # with ``actor.optimizer`` and ``critic.optimizer``
+    logger: Any
+    _current_progress_remaining: float
 
 
 class ActorCriticRatesMixin:
