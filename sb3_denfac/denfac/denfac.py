@@ -43,8 +43,8 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     env, **presets.PAPER)`` is Algorithm 1 as written (:mod:`~sb3_denfac.denfac.presets`). Why the default differs from
     the paper, and the implementation's choices (time limits, loss scale, batch norm, warm-up): docs/denfac.md.
 
-    :param policy: the policy model ("MlpPolicy"; "MultiInputPolicy" for Dict observations, SB3's CombinedExtractor;
-        or a :class:`DENFACPolicy` subclass)
+    :param policy: the policy model ("MlpPolicy"; "MultiInputPolicy" for Dict observations, SB3's CombinedExtractor; or a
+        :class:`DENFACPolicy` subclass)
     :param env: the environment, or a VecEnv of several: an update after each env's finished episode
         (:mod:`~sb3_denfac.common.episodic`)
     :param learning_rate: the rate (float or schedule) of each network whose own rate below is None
@@ -53,75 +53,72 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     :param critic_learning_rate: alpha_c, the critic's Adam step size (float or schedule); None means ``learning_rate``
     :param buffer_size: D, size of the FIFO replay buffer (paper: 3000-6000)
     :param learning_starts: steps before the first update (uniform actions meanwhile; paper: 0)
-    :param batch_size: an int = one uniform mini-batch of that size (drawn with replacement) per critic/actor step;
-        None = full batch (paper)
+    :param batch_size: an int = one uniform mini-batch of that size (drawn with replacement) per critic/actor step; None = full
+        batch (paper)
     :param gamma: discount factor gamma (on a goal env with HER, not given: ``presets.GOALS``' 0.95; below)
-    :param n_fitted_iterations: K, fitted iterations per update (paper: 10); with ``update_to_data_ratio``, the cap on
-        K_e, or its range ``(K_min, K_max)`` (K_max None: no cap; None alone: ``(1, None)``)
+    :param n_fitted_iterations: K, fitted iterations per update (paper: 10); with ``update_to_data_ratio``, the cap on K_e, or
+        its range ``(K_min, K_max)`` (K_max None: no cap; None alone: ``(1, None)``)
     :param critic_steps: Adam steps of the critic per fitted iteration (authors: 10)
     :param actor_steps: G, Adam steps of the actor per fitted iteration (paper: 25)
     :param reset_critic: re-initialise the critic (and its Adam state) at every fitted iteration (paper: Acrobot yes)
     :param reset_actor: re-initialise the actor (and its Adam state) at every fitted iteration (Algorithm 1: yes)
     :param inverting_gradients: bound the unbounded actor with inverting gradients (Hausknecht & Stone 2016)
-    :param weighting: "retrace" (c = min(1, pi_{k-1}(a|s)/pi_b(a|s))), "retrace_next_state_quirk" (the authors' code
-        evaluates pi_{k-1} at s' instead of s) or "none" (c = 1)
+    :param weighting: "retrace" (c = min(1, pi_{k-1}(a|s)/pi_b(a|s))), "retrace_next_state_quirk" (the authors' code evaluates
+        pi_{k-1} at s' instead of s) or "none" (c = 1)
     :param sigma: std of the truncated Gaussian exploration in the scaled action space (paper: 0.05)
     :param max_grad_norm: clip each network's global gradient L2 norm (authors: 10); None disables clipping
     :param bootstrap_on_timeout: bootstrap on time-limit truncations (True) or treat them as terminal (paper-era code)
     :param update_path: the :class:`~sb3_denfac.denfac.updaters.Updater` of Algorithm 1: "fast"
-        (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations or a
-        Dict of 1-D Boxes, the default MLP networks and Adam), "plain"
-        (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any policy) or "auto" (default: "fast" where it applies).
-        Both compute the same update up to float rounding (cost: ``benchmarks/results/update_cost/``). Models saved
-        with the removed "compiled" path load with "fast".
-        Prioritised sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
+        (:class:`~sb3_denfac.denfac.fast.FastUpdater`: hand-written steps on flat parameters; vector observations or a Dict of
+        1-D Boxes, the default MLP networks and Adam), "plain" (:class:`~sb3_denfac.denfac.updaters.AutogradUpdater`, any
+        policy) or "auto" (default: "fast" where it applies). Both compute the same update up to float rounding (cost:
+        ``benchmarks/results/update_cost/``). Models saved with the removed "compiled" path load with "fast". Prioritised
+        sampling is autograd only: "auto" then picks "plain" and "fast" refuses it
     :param prioritized: mini-batches of D drawn by TD error (paper: future work; Schaul et al.; :mod:`~.options`): "none"
         (uniform, default), "critic" (the critic's; the actor's stay uniform) or "both"; or a dict ``on`` (one of those),
         ``alpha`` in p_i = (abs(delta_i) + eps)^alpha (0.6), ``beta`` in w_i = (N P(i))^-beta / max_j (N P(j))^-beta (0.4),
         ``eps`` (1e-3); needs an int ``batch_size``
-    :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean
-        ||pi(s) - pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
-    :param update_to_data_ratio: rho, the compute dial (:mod:`~.options`): the update after an episode of n steps runs
-        K_e = min(K, ceil(rho n / critic_steps)) fitted iterations, about rho critic steps per env step, or within the
-        range ``n_fitted_iterations=(K_min, K_max)``; None (default, the paper): K at every update, whatever the
-        episode's length
-    :param target_policy_noise: std of the Gaussian noise added to pi_{k-1}(s') in the targets of eq. (4) (TD3's target
-        policy smoothing, in the scaled action space; default 0.2, TD3's; paper: 0, the deterministic next action)
+    :param actor_proximal: lambda of the proximal actor (:mod:`~.options`): normalised eq. (5) plus lambda mean ||pi(s) -
+        pi_old(s)||^2, pi_old = the actor before the update (default 1.0; paper: 0.0, eq. (5) as written)
+    :param update_to_data_ratio: rho, the compute dial (:mod:`~.options`): the update after an episode of n steps runs K_e =
+        min(K, ceil(rho n / critic_steps)) fitted iterations, about rho critic steps per env step, or within the range
+        ``n_fitted_iterations=(K_min, K_max)``; None (default, the paper): K at every update, whatever the episode's length
+    :param target_policy_noise: std of the Gaussian noise added to pi_{k-1}(s') in the targets of eq. (4) (TD3's target policy
+        smoothing, in the scaled action space; default 0.2, TD3's; paper: 0, the deterministic next action)
     :param target_noise_clip: the noise of ``target_policy_noise`` is clipped to +-this (TD3: 0.5)
-    :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "mean" (default,
-        their average) or "min" (clipped double Q, 0.4's default)
+    :param critic_target: how the Q networks of ``n_critics`` > 1 make the bootstrap value of eq. (4): "mean" (default, their
+        average) or "min" (clipped double Q, 0.4's default)
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value to the range of discounted returns the rewards in D allow
         (:mod:`~.options`; default False, paper: no bound)
-    :param frozen_targets: True (default, Algorithm 1): eq. (4)'s targets come from Q_{k-1}, computed once per fitted
-        iteration and held for its ``critic_steps``; False: CrossQ's bootstrapping without a target network (Bhatt et
-        al. 2024): every critic step computes Q(s, a) and Q(s', a') in one train-mode forward pass of the critic it
-        fits (its batch statistics over both), the bootstrap value detached; a' is pi_{k-1}(s') as above, fixed over
-        the iteration (the actor only moves after the critic's steps). Meant with ``policy_kwargs=dict(batch_renorm=True)``
-        (:class:`~.policies.DENFACCritic`); the autograd updater only
-    :param reset_every: re-initialise the actor and the critic, with fresh Adam states, at the first update at or past
-        every ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high
-        update-to-data ratios: SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
-    :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which
-        the last published policy plays (:mod:`~sb3_denfac.common.episodic`: what changes; default False: the update
-        runs between episodes, reproducible from the seed)
+    :param frozen_targets: True (default, Algorithm 1): eq. (4)'s targets come from Q_{k-1}, computed once per fitted iteration
+        and held for its ``critic_steps``; False: CrossQ's bootstrapping without a target network (Bhatt et al. 2024): every
+        critic step computes Q(s, a) and Q(s', a') in one train-mode forward pass of the critic it fits (its batch statistics
+        over both), the bootstrap value detached; a' is pi_{k-1}(s') as above, fixed over the iteration (the actor only moves
+        after the critic's steps). Meant with ``policy_kwargs=dict(batch_renorm=True)`` (:class:`~.policies.DENFACCritic`); the
+        autograd updater only
+    :param reset_every: re-initialise the actor and the critic, with fresh Adam states, at the first update at or past every
+        ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high update-to-data ratios:
+        SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
+    :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which the
+        last published policy plays (:mod:`~sb3_denfac.common.episodic`: what changes; default False: the update runs between
+        episodes, reproducible from the seed)
     :param replay_buffer_class: D's class: None (:class:`~.buffers.DENFACReplayBuffer`, or
         :class:`~.buffers.DENFACDictReplayBuffer` for Dict observations), SB3's ``HerReplayBuffer`` (hindsight goals:
-        :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them. With HER on a goal env (a Dict
-        observation with ``achieved_goal`` and ``desired_goal``), the settings not given take ``presets.GOALS``'
-        values (gamma 0.95, the compute dial, no proximal anchor: why, in :mod:`~.presets`); the model's
-        ``goal_settings_taken`` names them
+        :mod:`~.her`, with ``weighting="none"``) or a subclass of one of them. With HER on a goal env (a Dict observation with
+        ``achieved_goal`` and ``desired_goal``), the settings not given take ``presets.GOALS``' values (gamma 0.95, the compute
+        dial, no proximal anchor: why, in :mod:`~.presets`); the model's ``goal_settings_taken`` names them
     :param replay_buffer_kwargs: keyword arguments of the replay buffer
     :param stats_window_size: episodes averaged in the rollout logs
     :param tensorboard_log: TensorBoard log directory (None: no logging)
     :param policy_kwargs: ``net_arch`` (default ``dict(pi=[64, 64], qf=[64, 64])``; paper ``dict(pi=[20], qf=[50, 7])``),
         ``batch_norm`` (default False; paper True), ``init`` ("default": PyTorch's; "paper": N(0, 0.01^2)), ``n_critics``
-        (default 2, whose mean or minimum makes the targets: ``critic_target``; paper 1), ``bn_momentum``,
-        ``activation_fn``: :class:`DENFACPolicy`, whose defaults apply to the keys left out (and are saved with the model)
+        (default 2, whose mean or minimum makes the targets: ``critic_target``; paper 1), ``bn_momentum``, ``activation_fn``:
+        :class:`DENFACPolicy`, whose defaults apply to the keys left out (and are saved with the model)
     :param verbose: verbosity level
     :param seed: random seed
     :param device: torch device
-    :param torch_threads: torch threads inside ``learn()`` (default 1: tiny networks; None: leave torch's setting
-        alone); the caller's setting is restored when ``learn()`` returns (:mod:`~sb3_denfac.common.threads`)
+    :param torch_threads: torch threads inside ``learn()`` (default 1: tiny networks; None: leave torch's setting alone); the
+        caller's setting is restored when ``learn()`` returns (:mod:`~sb3_denfac.common.threads`)
     :param _init_setup_model: whether to build the networks at construction
     """
 
@@ -197,10 +194,8 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             gamma=gamma,
             train_freq=(1, "episode"),
             gradient_steps=-1,  # SB3 then passes train() the steps collected; one Algorithm 1 update per episode
-            action_noise=None,
             replay_buffer_class=replay_buffer_class,
             replay_buffer_kwargs=replay_buffer_kwargs,
-            optimize_memory_usage=False,
             policy_kwargs=dict(policy_kwargs or {}),  # copied: the caller's dict is not modified
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
@@ -208,14 +203,12 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             device=device,
             seed=seed,
             sde_support=False,
-            supported_action_spaces=None,  # checked by InputChecksMixin (UnsupportedSpaceError)
             support_multi_env=True,  # checked below with a clear message
         )
         check_holds_one_episode(self.env, self.buffer_size)
+        record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
         if _init_setup_model:  # a goal env with HER: presets.GOALS for the settings not given (her.py)
             self.goal_settings_taken = take_goal_settings(self, arguments, store_settings)
-        record_policy_defaults(self.policy_kwargs, self.policy_class, DEFAULT_NET_ARCH)  # saved: the file says its networks
-        if _init_setup_model:
             warn_ignored_settings(self)
             self._setup_model()
             warn_about_device(type(self).__name__, device, self.device, self.policy)
