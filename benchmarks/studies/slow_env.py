@@ -58,7 +58,7 @@ LABELS = {
     "sac_n4": "SAC, 4 envs, a step per transition",
 }
 #: finished episodes per run
-BUDGETS = {"Pendulum-v1": 30, "Reacher-v5": 100}
+BUDGETS = {"Pendulum-v1": 30, "Reacher-v5": 100, "Hopper-v5": 40}
 EVAL_EPISODES = 5
 
 
