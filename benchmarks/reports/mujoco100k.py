@@ -207,6 +207,7 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
 ROW_COLOURS = {
     "denfac_default": "black",
     "denfac_rho2": "tab:orange",
+    "denfac_crossq": "darkviolet",
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",
     "crossq_zoo": "tab:purple",

@@ -23,9 +23,8 @@ _BENCHMARKS = Path(__file__).resolve().parents[1]
 PACKAGE_HYPERPARAMS_DIR = _BENCHMARKS.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
 BENCHMARK_CONFIGS_DIR = _BENCHMARKS / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
 ABLATION_ROWS = BENCHMARK_CONFIGS_DIR / "ablation.yml"  # the ablation's rows and suite, as data
-SWEEP_PLAN = (
-    _BENCHMARKS / "results" / "cost" / "sweep_plan.csv"
-)  # estimated CPU seconds per run, written by benchmarks.studies.cost
+# estimated CPU seconds per run, written by benchmarks.studies.cost
+SWEEP_PLAN = _BENCHMARKS / "results" / "cost" / "sweep_plan.csv"
 
 
 @dataclass(frozen=True)
@@ -102,6 +101,15 @@ ALGOS: dict[str, Algo] = {
             base="denfac_data_efficient",
             overrides=(("update_to_data_ratio", 2.0),),
         ),  # fmt: skip
+        # the preset's candidate (research/frontier_critics): rho 2 with CrossQ's critic (batch renorm, no frozen copy)
+        Algo(
+            "denfac_crossq",
+            "denfac",
+            "DENFAC (rho 2, CrossQ's critic)",
+            "paper",
+            base="denfac_rho2",
+            overrides=(("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True})),
+        ),
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
         Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
@@ -183,9 +191,8 @@ class Budget:
 
 BUDGETS: dict[str, Budget] = {
     "acrobot": Budget(100, 10, 1),
-    # From CartPole's rest start a zero action balances forever (a near-zero initial actor would score a perfect 0):
-    # the evaluation starts from gymnasium's random state instead (uniform in +-0.05), as the authors tested from
-    # random states.
+    # From CartPole's rest start a zero action balances forever (a near-zero initial actor would score a perfect 0): the
+    # evaluation starts from gymnasium's random state instead (uniform in +-0.05), as the authors tested from them.
     "cartpole": Budget(100, 10, 5, (("random_start", True),)),
     "halfcheetah": Budget(100, 10, 3),
     "pendulum": Budget(40, 10, 5),
@@ -309,7 +316,7 @@ SUITES: dict[str, Suite] = {
             "mujoco100k",
             MUJOCO100K_ENVS,
             (
-                (("denfac_default", "denfac_rho2", "denfac_data_efficient"), _FIVE),
+                (("denfac_default", "denfac_rho2", "denfac_data_efficient", "denfac_crossq"), _FIVE),
                 (("sac_zoo",), (0, 1)),
                 (("crossq_zoo",), (0,)),
             ),
