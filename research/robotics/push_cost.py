@@ -4,6 +4,7 @@ warm-up, one torch thread; the success rate of 20 deterministic test episodes at
 chance: the object starts where the goal is in a few percent of episodes).
 
     python -m research.robotics.push_cost --steps 3000
+    python -m research.robotics.push_cost --probe 100000   # DENFAC only: success every 10k steps up to the budget
 """
 
 from __future__ import annotations
@@ -40,9 +41,22 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--probe", type=int, default=None, help="DENFAC alone for this many steps, evaluated every 10k")
     args = parser.parse_args()
     th.set_num_threads(1)
     out = Path(__file__).with_name("push_cost.jsonl")
+    if args.probe:
+        model, curve, cpu = DENFAC("MultiInputPolicy", gym.make("PandaPush-v3"), seed=args.seed, **HER), [], 0.0
+        while model.num_timesteps < args.probe:
+            start = time.process_time()
+            model.learn(10_000, reset_num_timesteps=model.num_timesteps == 0)
+            cpu += time.process_time() - start
+            curve.append((model.num_timesteps, success(model, args.seed)))
+            print(curve[-1], round(cpu), flush=True)
+        line = {"row": "denfac_goals_probe", "seed": args.seed, "steps": args.probe, "cpu_s": round(cpu), "success": curve}
+        with out.open("a") as f:
+            f.write(json.dumps(line) + "\n")
+        return
     makers = {
         "denfac_goals": lambda env: DENFAC("MultiInputPolicy", env, seed=args.seed, **HER),
         "sac_her_zoo": lambda env: SAC(
