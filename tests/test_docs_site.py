@@ -23,6 +23,7 @@ DOCS = REPO / "docs"
 ALGORITHMS = ("DENFAC", "SoftDENFAC", "NFAC", "CACLA", "DDPG", "CMAES")
 POLICY_MODULES = [f"sb3_denfac.{package}.policies" for package in ("denfac", "soft_denfac", "nfac", "cacla", "ddpg", "cmaes")]
 
+
 def _require_docs_extra() -> None:
     missing = [name for name in ("sphinx", "myst_parser", "sphinx_rtd_theme") if importlib.util.find_spec(name) is None]
     if missing:
