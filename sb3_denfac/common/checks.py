@@ -22,6 +22,7 @@ EpisodicOffPolicyAlgorithm)``). It checks:
 from __future__ import annotations
 
 import inspect
+from collections.abc import Mapping
 from typing import Any, Protocol, SupportsFloat, runtime_checkable
 
 import gymnasium as gym
@@ -173,12 +174,11 @@ def check_replay_buffer(model: Any) -> None:
         )
 
 
-def check_preset_keywords(cls: type, keywords: dict[str, Any]) -> None:
+def check_preset_keywords(cls: type, keywords: dict[str, Any], parameters: Mapping[str, inspect.Parameter]) -> None:
     """Refuse a preset of another algorithm given to ``cls``'s constructor (``SoftDENFAC(..., **presets.PAPER)``) with a
     ``TypeError`` (Python's type for an unexpected keyword argument) that names the preset, its algorithm and the keys
     ``cls`` does not take (:func:`~sb3_denfac.denfac.presets.foreign_preset_message`). Other unexpected keywords are
-    left to Python's own TypeError."""
-    parameters = inspect.signature(cls.__init__).parameters  # type: ignore[misc]
+    left to Python's own TypeError. ``parameters``: ``cls.__init__``'s."""
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
         return
     not_taken = [key for key in keywords if key not in parameters]
@@ -216,11 +216,12 @@ class InputChecksMixin:
     allow_non_finite_predict: bool = False
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Any:
-        check_preset_keywords(cls, kwargs)  # before Python binds the arguments (its TypeError would name one key)
+        parameters = inspect.signature(cls.__init__).parameters  # type: ignore[misc]
+        check_preset_keywords(cls, kwargs, parameters)  # before Python binds the arguments (its TypeError would name one)
         model = super().__new__(cls)
         # the constructor arguments the caller gave (positional ones by name), which settings chosen from the env leave
         # alone (DENFAC's goal settings, :func:`~sb3_denfac.denfac.her.take_goal_settings`)
-        positional = [name for name in inspect.signature(cls.__init__).parameters if name != "self"][: len(args)]  # type: ignore[misc]
+        positional = [name for name in parameters if name != "self"][: len(args)]
         model._given_arguments = frozenset(positional) | frozenset(kwargs)
         return model
 

@@ -70,8 +70,9 @@ def forwarding_signature(cls: type, parent: type, pinned: Mapping[str, str]) -> 
 def check_forwarded(cls: type, kwargs: Mapping[str, Any], pinned: Mapping[str, str]) -> None:
     """Refuse, with Python's ``TypeError`` naming ``cls``, a keyword that ``cls`` pins (and why) or that its signature
     (:func:`forwarding_signature`) does not hold."""
+    parameters = inspect.signature(cls.__init__).parameters  # type: ignore[misc]
     for name in kwargs:
         if name in pinned:
             raise TypeError(f"{cls.__name__} does not take {name}: {pinned[name]}")
-        if name not in inspect.signature(cls.__init__).parameters:
+        if name not in parameters:
             raise TypeError(f"{cls.__name__}.__init__() got an unexpected keyword argument {name!r}")
