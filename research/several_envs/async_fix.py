@@ -162,7 +162,87 @@ class Both(Publish, Anchor):
         return super().make_updater(policy)
 
 
-VARIANTS = {"sync": DENFAC, "stale": Stale, "anchor": Anchor, "publish": Publish, "both": Both}
+class Joint(DENFAC):
+    """The episodes that end at one step get one update, its K_e from their summed length (K without
+    ``update_to_data_ratio``), instead of one update each back to back: a job moves the actor once per batch."""
+
+    def _finished_episodes(self, gradient_steps: int) -> list[int]:
+        lengths = super()._finished_episodes(gradient_steps)
+        return [sum(lengths)] if lengths else lengths
+
+
+class PublishJoint(Joint, Publish):
+    """``publish`` with one joint update per batch: the job is one update, so it lasts 1/n_envs of ``duration``."""
+
+    def _actor_for_step(self) -> th.nn.Module:
+        full, self.duration = self.duration, self.duration / self.n_envs
+        try:
+            return super()._actor_for_step()
+        finally:
+            self.duration = full
+
+
+class JointSum(DENFAC):
+    """One update per batch with the batch's summed fitted iterations (n_envs K): the iterations of back-to-back
+    updates, with one proximal anchor pi_old and one optimizer state instead of one per episode."""
+
+    def _run_updates(self, iterations: list[int], reset: bool) -> None:
+        super()._run_updates([sum(iterations)], reset)
+
+
+class PublishJointSum(JointSum, Publish):
+    """``publish`` with ``sync_joint_sum``'s update: the job's length is unchanged."""
+
+
+class Cut(Publish):
+    """``publish`` with the job cut at the end of the batch it overlaps: only the fitted iterations published before
+    the batch ends (``1 / duration`` of them) are run; the next job starts from the last one."""
+
+    def _run_updates(self, iterations: list[int], reset: bool) -> None:
+        budget = max(1, int(sum(iterations) / max(self.duration, 1.0)))
+        kept = []
+        for n in iterations:
+            if budget <= 0:
+                break
+            kept.append(min(n, budget))
+            budget -= kept[-1]
+        super()._run_updates(kept, reset)
+
+    def _actor_for_step(self) -> th.nn.Module:
+        full, self.duration = self.duration, min(self.duration, 1.0)  # the cut job lasts at most the episode
+        try:
+            return super()._actor_for_step()
+        finally:
+            self.duration = full
+
+
+class CutUpdates(Cut):
+    """The library's asynchronous update (``common/episodic.py``): ``cut`` in whole updates, the first always run:
+    the updates of the batch not started before the next batch ends are dropped."""
+
+    def _run_updates(self, iterations: list[int], reset: bool) -> None:
+        budget = sum(iterations) / max(self.duration, 1.0)
+        kept = [iterations[0]]
+        for n in iterations[1:]:
+            if sum(kept) + n > budget:
+                break
+            kept.append(n)
+        Publish._run_updates(self, kept, reset)
+
+
+VARIANTS = {
+    "sync": DENFAC,
+    "stale": Stale,
+    "anchor": Anchor,
+    "publish": Publish,
+    "both": Both,
+    "sync_joint": Joint,
+    "publish_joint": PublishJoint,
+    "sync_joint_sum": JointSum,
+    "publish_joint_sum": PublishJointSum,
+    "cut": Cut,
+    "cut_updates": CutUpdates,
+}
 
 
 def diagnostic(model: Any) -> dict[str, float]:

@@ -31,6 +31,15 @@ class Joint(DENFAC):
         super()._run_updates([sum(iterations)], reset)
 
 
+class JointK(DENFAC):
+    """DENFAC with one update per step at which episodes ended, K_e from their summed length (K without
+    ``update_to_data_ratio``): the actor moves one update per batch of new data (async_fix.py's ``sync_joint``)."""
+
+    def _finished_episodes(self, gradient_steps: int) -> list[int]:
+        lengths = super()._finished_episodes(gradient_steps)
+        return [sum(lengths)] if lengths else lengths
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
@@ -40,7 +49,12 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(__file__).with_name("joint_updates.json")
     results = json.loads(out.read_text()) if out.exists() else {}
     for seed in args.seeds:
-        variants = (("one_env", DENFAC, 1), ("back_to_back", DENFAC, args.n_envs), ("joint", Joint, args.n_envs))
+        variants = (
+            ("one_env", DENFAC, 1),
+            ("back_to_back", DENFAC, args.n_envs),
+            ("joint", Joint, args.n_envs),
+            ("joint_k", JointK, args.n_envs),
+        )
         for name, cls, n_envs in variants:
             key = f"{name}/n{n_envs}/seed{seed}"
             if key in results:

@@ -33,18 +33,28 @@ comes on an env without a time limit. Algorithm 1 updates after every episode, w
   actions the actor moved to before it moved further, and the actor ran off to the action bounds
   (research/several_envs/README.md, "The asynchronous update's lag on Reacher").
 
+  With several envs the episodes that end at the same step get their updates back to back, in one job. When the next
+  episode ends while a job runs, the job ends at its next fitted iteration (:meth:`_job_goes_on`, which the subclass
+  asks between iterations of a job's later updates; the first update of a job always runs whole, so with one env
+  nothing is cut): the updates left are dropped. Without that bound the episodes played while 4 back-to-back updates
+  ran came from the first of them, and the next job fitted the actor 4 updates further on a critic that had seen none
+  of its actions: on Reacher-v5 with 4 envs the actor ran off to the action bounds. With the bound it held 2 of 3
+  seeds there, and Pendulum-v1 kept its episodes to the level (research/several_envs/README.md); ``learn`` still warns
+  beyond :data:`ASYNC_ENVS_MEASURED` envs. On a fast env, where the updates outlast the episodes, most updates past a
+  job's first are dropped: the asynchronous update is for envs whose steps, not the updates, take the time.
+
   What changes against the update in place: the first steps of an episode are played by the previous policy and by
   the running update's snapshots; an episode's end waits for the update still running, if any (at most one is in
-  flight, and every finished episode still gets its update; the next update starts from the finished one, never from
-  a snapshot); the learner's random draws interleave with the env's, so runs are not reproducible from the seed.
+  flight; the next update starts from the finished one, never from a snapshot); with several envs, updates may be
+  dropped (above); the learner's random draws interleave with the env's, so runs are not reproducible from the seed.
   ``learn`` returns after the last update is published. On an exception (``KeyboardInterrupt`` included) it waits for
   the running update, publishes it, and ends the thread before the exception propagates. ``save`` during ``learn``
   writes the last published policy (possibly a snapshot inside an update).
 
 ``learn`` runs with ``torch_threads`` torch threads (:mod:`~sb3_denfac.common.threads`). A subclass provides
 :meth:`_explore`, :meth:`_fit_all`, :meth:`_record` and :meth:`_create_aliases`, calls :meth:`_run_updates` from its
-``train`` with what :meth:`_finished_episodes` hands it and :meth:`_offer_snapshot` between its fitted iterations,
-and uses a replay buffer with the :class:`EpisodicBuffer` methods.
+``train`` with what :meth:`_finished_episodes` hands it, :meth:`_offer_snapshot` between its fitted iterations and
+:meth:`_job_goes_on` inside a job's later updates, and uses a replay buffer with the :class:`EpisodicBuffer` methods.
 """
 
 from __future__ import annotations
@@ -67,8 +77,8 @@ from sb3_denfac.common.exploration import warm_up_actions
 from sb3_denfac.common.learner import BackgroundLearner
 from sb3_denfac.common.threads import DEFAULT_TORCH_THREADS, torch_threads
 
-#: the most envs with which the asynchronous update held the return where it was measured (Reacher-v5, 2 envs; with
-#: 4 it lost: :meth:`EpisodicOffPolicyAlgorithm.learn` warns beyond this)
+#: the most envs with which the asynchronous update held the return in every seed where it was measured (Reacher-v5,
+#: 2 envs; with 4 one seed of 3 ran off to the action bounds: :meth:`EpisodicOffPolicyAlgorithm.learn` warns beyond)
 ASYNC_ENVS_MEASURED = 2
 
 
@@ -158,16 +168,16 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
                     self._learner = None
 
     def _warn_async_with_several_envs(self) -> None:
-        """Warn, once per model, that the asynchronous update with more than 2 envs lost where it was measured."""
+        """Warn, once per model, that the asynchronous update with more than 2 envs lost a seed where it was measured."""
         if self.n_envs <= ASYNC_ENVS_MEASURED or getattr(self, "_warned_async_envs", False):
             return
         self._warned_async_envs = True
         warnings.warn(
-            f"async_update=True with {self.n_envs} envs: the updates of the episodes that end together run back to back "
-            "on one policy's data, and the asynchronous update plays the next episodes with the policy from before "
-            f"them; on Reacher-v5 with 4 envs the actor ran off to the action bounds (-107 against -4 to -23 with the "
-            f"update in place), with up to {ASYNC_ENVS_MEASURED} envs it held (research/several_envs/README.md). "
-            "Compare with async_update=False, or use fewer envs",
+            f"async_update=True with {self.n_envs} envs: the episodes that end together get their updates in one job, "
+            "which the next episodes play while it runs; on Reacher-v5 with 4 envs the actor still ran off to the "
+            "action bounds in 1 of 3 seeds (-108 against -4 to -23 with the update in place), with up to "
+            f"{ASYNC_ENVS_MEASURED} envs it held (research/several_envs/README.md). Compare with async_update=False, "
+            "or use fewer envs",
             UserWarning,
             stacklevel=3,
         )
@@ -250,7 +260,9 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         if self._learner is None:
             self._record(self._fit_all(self.policy, self.replay_buffer.all_samples(env=self._vec_normalize_env), *plan))
             return
-        self._publish(wait=True)  # the update still running, if any: at most one in flight
+        if self._learner.busy:  # the update still running: its updates not started are dropped (module docstring)
+            self._learner.request_end()
+        self._publish(wait=True)  # at most one in flight
         policy = copy.deepcopy(self.policy)
         data = self.replay_buffer.all_samples(env=self._vec_normalize_env)
         self._learner.submit(self._fit_in_background, policy, data, plan)
@@ -271,6 +283,12 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         if flush is not None:
             flush()
         learner.offer(copy.deepcopy(policy))
+
+    def _job_goes_on(self) -> bool:
+        """Inside a job's updates past its first, after each fitted iteration: False inside an asynchronous ``learn``
+        once the next episode has ended (the job ends there: module docstring); True anywhere else."""
+        learner = self._learner
+        return learner is None or not learner.inside_job() or not learner.end_requested()
 
     def _publish(self, wait: bool) -> None:
         """Make the learner's finished update (``wait``: or the running one, once it ends) the model's policy, and

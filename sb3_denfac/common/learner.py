@@ -1,6 +1,8 @@
 """The background learner of the asynchronous update (``async_update=True``): one thread that runs one update job
 at a time, beside the env steps of the calling thread (:mod:`~sb3_denfac.common.episodic`, "The asynchronous
-update"), and hands the caller a snapshot of the job's progress (:meth:`BackgroundLearner.offer`) before its end."""
+update"), and hands the caller a snapshot of the job's progress (:meth:`BackgroundLearner.offer`) before its end; the
+caller may ask a running job to end early (:meth:`BackgroundLearner.request_end`), which the job reads between its
+steps (:meth:`BackgroundLearner.end_requested`)."""
 
 from __future__ import annotations
 
@@ -16,7 +18,8 @@ THREAD_NAME = "denfac-learner"
 class BackgroundLearner:
     """One learner thread running one job at a time (:mod:`concurrent.futures`); an exception in the job is raised in
     the caller by :meth:`result`. While a job runs it may :meth:`offer` snapshots of its progress, which the caller
-    takes with :meth:`take_offer` (the newest only; :meth:`result` drops the one not taken)."""
+    takes with :meth:`take_offer` (the newest only; :meth:`result` drops the one not taken). The caller may ask the
+    running job to end early (:meth:`request_end`); the job decides where it can stop (:meth:`end_requested`)."""
 
     def __init__(self) -> None:
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix=THREAD_NAME)
@@ -24,6 +27,7 @@ class BackgroundLearner:
         self._lock = threading.Lock()
         self._offered: Any = None
         self._inside = threading.local()  # inside_job: set in the learner thread while a job runs
+        self._end = threading.Event()  # request_end: set by the caller, cleared at each submit
 
     @property
     def busy(self) -> bool:
@@ -42,6 +46,7 @@ class BackgroundLearner:
         if self._job is not None:
             raise RuntimeError("the learner is still busy: take the result of its job first")
         self._take()
+        self._end.clear()
 
         def run() -> Any:
             self._inside.job = True
@@ -51,6 +56,14 @@ class BackgroundLearner:
                 self._inside.job = False
 
         self._job = self._executor.submit(run)
+
+    def request_end(self) -> None:
+        """From the caller: the running job should end at its next point where it can (its result stays whole)."""
+        self._end.set()
+
+    def end_requested(self) -> bool:
+        """From the running job: whether the caller asked it to end early."""
+        return self._end.is_set()
 
     def offer(self, snapshot: Any) -> None:
         """From the running job: ``snapshot`` replaces the one offered before, if the caller has not taken it."""

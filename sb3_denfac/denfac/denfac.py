@@ -280,13 +280,21 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     def _fit_all(self, policy: DENFACPolicy, data: DENFACReplayBufferSamples, iterations: list[int], reset: bool) -> list:
         """The updates of ``policy`` on D's content ``data``, back to back, ``iterations[i]`` fitted iterations each: a
         new updater for each, made after the previous one finished; with ``reset`` (``reset_every``), ``policy``'s actor
-        and critic re-initialised first."""
+        and critic re-initialised first. An asynchronous job's updates past the first end at the fitted iteration after
+        which the next episode has ended (``_job_goes_on``; the updates left are dropped)."""
         if reset:
             policy.reset_actor()
             policy.reset_critic()
-        return [self._fit(self.make_updater(policy), data, n) for n in iterations]
+        fits = [self._fit(self.make_updater(policy), data, iterations[0])]
+        for n in iterations[1:]:
+            if not self._job_goes_on():
+                break
+            fits.append(self._fit(self.make_updater(policy), data, n, may_end_early=True))
+        return fits
 
-    def _fit(self, updater: Updater, data: DENFACReplayBufferSamples, n_iterations: int) -> FitResult:
+    def _fit(
+        self, updater: Updater, data: DENFACReplayBufferSamples, n_iterations: int, may_end_early: bool = False
+    ) -> FitResult:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` fitted iterations over D (``data``, the
         buffer's content), on the networks of ``updater``. Reads nothing else of the model but its settings, so that it
         can run on copies in the learner thread (``async_update``)."""
@@ -331,6 +339,9 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             else:
                 actor_objective = updater.fit_actor(take(obs, sample.actor_rows), sample.actor_batches)
             self._offer_snapshot(updater.policy, updater.finish)  # async_update: the update so far plays next
+            if may_end_early and not self._job_goes_on():  # a job's later update, cut by the next episodes' end
+                n_iterations = k + 1
+                break
         updater.finish()
         seconds = time.perf_counter() - start
         n = n_rows(rewards)
