@@ -10,7 +10,20 @@ Variants (each DENFAC + SB3's ``HerReplayBuffer``, ``n_sampled_goal`` 4, "future
 - ``entry_goals8``: ``entry`` with ``n_sampled_goal`` 8 (twice the goals per transition in each draw);
 - ``plain``: ``DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer)``, nothing else (on a goal env
   with HER it takes ``presets.GOALS`` for the settings not given: the entry's);
-- ``plain_gamma``: the plain call with ``gamma=0.95``.
+- ``plain_gamma``: the plain call with ``gamma=0.95``;
+- ``soft``: the plain call with ``SoftDENFAC`` (SAC's squashed-Gaussian actor and soft targets inside the fitted
+  iterations; it takes ``presets.GOALS`` too, ``actor_proximal`` being pinned to 0 by its class, and keeps its own
+  ``bootstrap_bounds=True``);
+- ``sigma02``, ``sigma03``: the plain call with DENFAC's exploration ``sigma`` 0.2 / 0.3 (default 0.1);
+- ``warmup``: the plain call with ``learning_starts=100`` (two episodes of uniform actions before the first update);
+- ``bounds``: the plain call with ``bootstrap_bounds=True`` (SoftDENFAC's default: the bootstrap clipped to the
+  returns the rewards allow), and ``soft_nobounds``: ``soft`` with ``bootstrap_bounds=False`` (DENFAC's default):
+  which of the two differences between ``soft`` and ``plain`` matters;
+- ``soft_warmup``: ``soft`` with ``learning_starts=100``;
+- ``soft_alpha01``: ``soft`` with the tuned alpha starting at 0.1 instead of 1 (``ent_coef="auto_0.1"``): less
+  entropy in the first episodes' exploration and targets.
+
+pybullet prints its build flags on stdout: keep only the JSON lines (``| grep '^{'``) when appending to the results.
 
 The robotics suite's protocol: training goals seeded (every reset of the training env carries a seed: ``SEED * 1000``
 and up), 20 deterministic test episodes on goals of their own (seeds 10,000 and up, the same at every evaluation)
@@ -32,12 +45,25 @@ import panda_gym  # noqa: F401  (registers PandaReach-v3)
 from stable_baselines3 import HerReplayBuffer
 from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 
-from sb3_denfac import DENFAC
+from sb3_denfac import DENFAC, SoftDENFAC
 from sb3_denfac.denfac import DENFACHerReplayBuffer
 
 MAX_EPISODES, EVERY, TEST_GOALS = 60, 5, 20
 HER_KWARGS = dict(goal_selection_strategy="future", n_sampled_goal=4)
 ENTRY = dict(gamma=0.95, update_to_data_ratio=10, n_fitted_iterations=(1, 10), actor_proximal=0.0)
+#: variants of the plain call: the class and the settings given on top of ``replay_buffer_class=HerReplayBuffer``
+PLAIN = {
+    "plain": (DENFAC, {}),
+    "plain_gamma": (DENFAC, dict(gamma=0.95)),
+    "soft": (SoftDENFAC, {}),
+    "sigma02": (DENFAC, dict(sigma=0.2)),
+    "sigma03": (DENFAC, dict(sigma=0.3)),
+    "warmup": (DENFAC, dict(learning_starts=100)),
+    "bounds": (DENFAC, dict(bootstrap_bounds=True)),
+    "soft_nobounds": (SoftDENFAC, dict(bootstrap_bounds=False)),
+    "soft_warmup": (SoftDENFAC, dict(learning_starts=100)),
+    "soft_alpha01": (SoftDENFAC, dict(ent_coef="auto_0.1")),
+}
 
 
 class GoalsOncePerUpdate(DENFACHerReplayBuffer):
@@ -81,10 +107,9 @@ def success(model: DENFAC) -> float:
 
 def make(variant: str, seed: int) -> DENFAC:
     env = SeededResets(gym.make("PandaReach-v3"), first=seed * 1000)
-    if variant == "plain":
-        return DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, seed=seed)
-    if variant == "plain_gamma":
-        return DENFAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, gamma=0.95, seed=seed)
+    if variant in PLAIN:
+        algorithm, given = PLAIN[variant]
+        return algorithm("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, seed=seed, **given)
     buffer = {"entry": HerReplayBuffer, "entry_once": GoalsOncePerUpdate, "entry_goals8": HerReplayBuffer}[variant]
     her = {**HER_KWARGS, "n_sampled_goal": 8} if variant == "entry_goals8" else HER_KWARGS
     return DENFAC("MultiInputPolicy", env, replay_buffer_class=buffer, replay_buffer_kwargs=her, seed=seed, **ENTRY)
@@ -103,6 +128,9 @@ def run(variant: str, seed: int) -> dict:
             break
     settings = dict(gamma=model.gamma, n_fitted_iterations=model.n_fitted_iterations, dial=model.update_to_data_ratio)
     settings["actor_proximal"] = model.actor_proximal
+    sigma = None if isinstance(model, SoftDENFAC) else model.sigma  # SoftDENFAC's actor samples its own Gaussian
+    settings.update(sigma=sigma, learning_starts=model.learning_starts, bootstrap_bounds=model.bootstrap_bounds)
+    settings["algorithm"], settings["goal_settings_taken"] = type(model).__name__, model.goal_settings_taken
     return dict(variant=variant, seed=seed, episodes_to_90=reached, cpu_s=round(cpu, 1), evaluations=evaluations, **settings)
 
 
