@@ -297,7 +297,8 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     ) -> FitResult:
         """One end-of-episode update: Algorithm 1 with ``n_iterations`` fitted iterations over D (``data``, the
         buffer's content), on the networks of ``updater``. Reads nothing else of the model but its settings, so that it
-        can run on copies in the learner thread (``async_update``)."""
+        can run on copies in the learner thread (``async_update``); ``may_end_early``: a job's later update, which ends
+        after the fitted iteration at which the next episode has ended (``_job_goes_on``)."""
         start = time.perf_counter()
         obs, actions, next_obs, rewards = data.observations, data.actions, data.next_observations, data.rewards
         terminal = data.dones if self.bootstrap_on_timeout else th.clamp(data.dones + data.timeouts, max=1.0)
