@@ -23,14 +23,25 @@ Variants (each DENFAC + SB3's ``HerReplayBuffer``, ``n_sampled_goal`` 4, "future
 - ``soft_alpha01``: ``soft`` with the tuned alpha starting at 0.1 instead of 1 (``ent_coef="auto_0.1"``): less
   entropy in the first episodes' exploration and targets.
 
+And the robotics suite's peers on DENFAC's schedule, built as the suite builds them: ``sac_matched``,
+``td3_matched`` (SB3's SAC and TD3 + HER): the row's settings on PandaReach-v3 from
+``benchmarks.runner.hyperparams.load_hyperparams`` (``hyperparams/sac.yml`` / ``td3.yml``, entry ``PandaReach-v3``,
+with ``suites.MATCHED_SCHEDULE`` on top: ``train_freq=(1, "episode")``, ``gradient_steps=500``), the env and model
+from ``sb3_denfac.zoo.make_model`` as ``benchmarks.runner.task.run_one`` does (the zoo's ``VecNormalize``, its action
+noise; one torch thread), with ``SeededResets`` added as the entry's ``env_wrapper`` for the seeded training goals.
+The test episodes see the observations normalised with the model's statistics, as the suite's evaluation does.
+
 pybullet prints its build flags on stdout: keep only the JSON lines (``| grep '^{'``) when appending to the results.
 
-The robotics suite's protocol: training goals seeded (every reset of the training env carries a seed: ``SEED * 1000``
-and up), 20 deterministic test episodes on goals of their own (seeds 10,000 and up, the same at every evaluation)
-every 5 training episodes; a run stops at the first evaluation at 90% or after 60 episodes. One JSON line per run on
-stdout: the evaluations (episode, share of goals reached), the episode of the first at 90% (None: not within 60) and
-the CPU seconds of training (process time inside ``learn``, the evaluations left out) to there. Results: README.md
-beside this file.
+The robotics suite's protocol: training goals seeded (every reset of the training env carries a seed: in effect
+``SEED``, ``SEED + 1``... and not ``SEED * 1000`` and up, as the model's seeding seeds the first reset and
+``SeededResets`` counts on from it; the same for every variant), 20 deterministic test episodes on goals of their
+own (seeds 10,000 and up, the same at every evaluation) every 5 training episodes; a run stops at the first
+evaluation at 90% or after 60 episodes. One JSON line per run on stdout: the evaluations (episode, share of goals
+reached), the episode of the first at 90% (None: not within 60) and the CPU seconds of training (process time inside
+``learn``, the evaluations left out) to there. Unlike the suite's single ``learn`` call, the stop every 5 episodes
+(``StopTrainingOnMaxEpisodes``) drops that episode's last transition and the update after it, for every variant
+alike. Results: README.md beside this file.
 """
 
 from __future__ import annotations
@@ -48,6 +59,8 @@ from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 from sb3_denfac import DENFAC, SoftDENFAC
 from sb3_denfac.denfac import DENFACHerReplayBuffer
 
+ENV_ID = "PandaReach-v3"
+
 MAX_EPISODES, EVERY, TEST_GOALS = 60, 5, 20
 HER_KWARGS = dict(goal_selection_strategy="future", n_sampled_goal=4)
 ENTRY = dict(gamma=0.95, update_to_data_ratio=10, n_fitted_iterations=(1, 10), actor_proximal=0.0)
@@ -64,6 +77,8 @@ PLAIN = {
     "soft_warmup": (SoftDENFAC, dict(learning_starts=100)),
     "soft_alpha01": (SoftDENFAC, dict(ent_coef="auto_0.1")),
 }
+#: the robotics suite's rows run here as that suite builds them (``benchmarks.runner.suites.ALGOS``)
+SUITE_ROWS = ("sac_matched", "td3_matched")
 
 
 class GoalsOncePerUpdate(DENFACHerReplayBuffer):
@@ -89,15 +104,18 @@ class SeededResets(gym.Wrapper):
         return self.env.reset(seed=self.next_seed - 1, options=options)
 
 
-def success(model: DENFAC) -> float:
-    """The share of the 20 deterministic test episodes that end at the goal (the same goals at every call)."""
-    env = SeededResets(gym.make("PandaReach-v3"), first=10_000)
+def success(model) -> float:
+    """The share of the 20 deterministic test episodes that end at the goal (the same goals at every call); a model
+    trained on a ``VecNormalize`` env (the peers' zoo entries) sees the observations normalised with its statistics,
+    as in ``benchmarks.runner.task.evaluate``."""
+    env = SeededResets(gym.make(ENV_ID), first=10_000)
+    normalizer = model.get_vec_normalize_env()
     reached = []
     for _ in range(TEST_GOALS):
         obs, _ = env.reset()
         done, info = False, {}
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(obs if normalizer is None else normalizer.normalize_obs(obs), deterministic=True)
             obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated
         reached.append(float(info.get("is_success", False)))
@@ -105,8 +123,25 @@ def success(model: DENFAC) -> float:
     return float(np.mean(reached))
 
 
+def suite_row(row: str, seed: int) -> tuple:
+    """``(model, source)``: the robotics suite's row ``row`` on PandaReach-v3, its settings resolved by the suite's
+    code and the model built by the zoo's preprocessing, as ``benchmarks.runner.sweep`` and ``task.run_one`` do; the
+    one addition is the entry's ``env_wrapper``: ``SeededResets`` from ``seed * 1000``, as the other variants' env."""
+    import torch
+
+    from benchmarks.runner.hyperparams import load_hyperparams
+    from benchmarks.runner.suites import ALGOS
+    from sb3_denfac.zoo import make_model
+
+    torch.set_num_threads(1)  # as run_one (DENFAC's learn() takes one thread by default)
+    hyperparams, source = load_hyperparams(row, ENV_ID)
+    assert "env_wrapper" not in hyperparams, f"{source} has an env_wrapper of its own"
+    hyperparams = {**hyperparams, "env_wrapper": {SeededResets: {"first": seed * 1000}}}
+    return make_model(ALGOS[row].zoo_algo, ENV_ID, hyperparams, seed=seed), source
+
+
 def make(variant: str, seed: int) -> DENFAC:
-    env = SeededResets(gym.make("PandaReach-v3"), first=seed * 1000)
+    env = SeededResets(gym.make(ENV_ID), first=seed * 1000)
     if variant in PLAIN:
         algorithm, given = PLAIN[variant]
         return algorithm("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, seed=seed, **given)
@@ -116,7 +151,7 @@ def make(variant: str, seed: int) -> DENFAC:
 
 
 def run(variant: str, seed: int) -> dict:
-    model = make(variant, seed)
+    model, source = suite_row(variant, seed) if variant in SUITE_ROWS else (make(variant, seed), None)
     evaluations, cpu, reached = [], 0.0, None
     for episode in range(EVERY, MAX_EPISODES + 1, EVERY):
         start = time.process_time()
@@ -126,12 +161,19 @@ def run(variant: str, seed: int) -> dict:
         if evaluations[-1][1] >= 0.9:
             reached = episode
             break
+    head = dict(variant=variant, seed=seed, episodes_to_90=reached, cpu_s=round(cpu, 1), evaluations=evaluations)
+    if source is not None:  # an SB3 peer
+        train_freq = [model.train_freq.frequency, model.train_freq.unit.value]
+        settings = dict(gamma=model.gamma, train_freq=train_freq, gradient_steps=model.gradient_steps)
+        settings.update(learning_starts=model.learning_starts, normalize=model.get_vec_normalize_env() is not None)
+        settings.update(algorithm=type(model).__name__, hyperparams_source=source, n_updates=model._n_updates)
+        return {**head, **settings}
     settings = dict(gamma=model.gamma, n_fitted_iterations=model.n_fitted_iterations, dial=model.update_to_data_ratio)
     settings["actor_proximal"] = model.actor_proximal
     sigma = None if isinstance(model, SoftDENFAC) else model.sigma  # SoftDENFAC's actor samples its own Gaussian
     settings.update(sigma=sigma, learning_starts=model.learning_starts, bootstrap_bounds=model.bootstrap_bounds)
     settings["algorithm"], settings["goal_settings_taken"] = type(model).__name__, model.goal_settings_taken
-    return dict(variant=variant, seed=seed, episodes_to_90=reached, cpu_s=round(cpu, 1), evaluations=evaluations, **settings)
+    return {**head, **settings}
 
 
 def main() -> None:
