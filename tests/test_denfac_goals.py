@@ -306,8 +306,9 @@ def test_panda_reach_without_its_package_names_the_extra(tmp_path, monkeypatch) 
 
 
 def test_robotics_benchmark_runs_a_goal_env_and_reports(tmp_path):
-    """The robotics suite's rows (DENFAC + HER, SB3 SAC + HER on DENFAC's schedule) on a goal env from zoo-style files,
-    evaluated by the share of goals reached, and ``benchmarks.reports.robotics``'s report (table, target line, figure)."""
+    """The robotics suite's rows (DENFAC and SoftDENFAC + HER, SB3 SAC + HER on DENFAC's schedule) on a goal env from
+    zoo-style files, evaluated by the share of goals reached, and ``benchmarks.reports.robotics``'s report (table, target
+    line, figure)."""
     import yaml
 
     from benchmarks import run as runner
@@ -320,6 +321,7 @@ def test_robotics_benchmark_runs_a_goal_env_and_reports(tmp_path):
     her = {"replay_buffer_class": "HerReplayBuffer", "replay_buffer_kwargs": "dict(n_sampled_goal=4)"}
     entries = {
         "denfac": {"update_to_data_ratio": 10, "n_fitted_iterations": [1, 2], "critic_steps": 20, "actor_steps": 10},
+        "soft_denfac": {"update_to_data_ratio": 10, "n_fitted_iterations": [1, 2], "critic_steps": 20, "actor_steps": 10},
         "sac": {"learning_starts": 10},
     }
     hyperparams = tmp_path / "hyperparams"
@@ -328,15 +330,16 @@ def test_robotics_benchmark_runs_a_goal_env_and_reports(tmp_path):
         entry = {"policy": "MultiInputPolicy", "gamma": 0.95, "batch_size": 64, **her, **entry}
         (hyperparams / f"{algo}.yml").write_text(yaml.safe_dump({env_id: entry}))
     results = tmp_path / "results"
-    args = ["--algos", "denfac_her", "sac_matched", "--envs", env_id, "--seeds", "0", "--episodes", "6"]
+    args = ["--algos", "denfac_her", "soft_denfac_her", "sac_matched", "--envs", env_id, "--seeds", "0", "--episodes", "6"]
     args += ["--hyperparams", str(hyperparams), "--results", str(results), "--workers", "0", "--no-analysis"]
     assert runner.main(args) == 0
     records = store.read_runs(results)
-    assert {r["algo"] for r in records} == {"denfac_her", "sac_matched"}
+    assert {r["algo"] for r in records} == {"denfac_her", "soft_denfac_her", "sac_matched"}
     for record in records:  # one evaluation at the budget: each of its episodes scores 1.0 at a goal, else 0.0
         assert record["evaluations"][-1]["episode"] == 6 and set(record["evaluations"][-1]["scores"]) <= {0.0, 1.0}
         assert "HerReplayBuffer" in record["hyperparams"]["replay_buffer_class"]
     text = robotics.report(results)
-    assert f"## {env_id}" in text and "DENFAC + HER (zoo entry)" in text and "SB3 SAC + HER on DENFAC's schedule" in text
-    assert "PandaReach-v3: not measured yet" in text
+    assert f"## {env_id}" in text and "SB3 SAC + HER on DENFAC's schedule" in text
+    assert "DENFAC + HER (zoo entry)" in text and "SoftDENFAC + HER (zoo entry)" in text
+    assert "PandaReach-v3: DENFAC + HER (zoo entry) not measured yet" in text
     assert (results / "robotics.png").stat().st_size > 0

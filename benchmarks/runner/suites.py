@@ -113,6 +113,8 @@ ALGOS: dict[str, Algo] = {
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
         Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
+        # the same with SAC's actor (hyperparams/soft_denfac.yml: presets.GOALS' values, SoftDENFAC's bounds)
+        Algo("soft_denfac_her", "soft_denfac", "SoftDENFAC + HER (zoo entry)", "paper", base="soft_denfac"),
         Algo("nfac", "nfac", "NFAC+", "paper"),
         Algo("cacla", "cacla", "CACLA+", "paper"),
         Algo("cmaes", "cmaes", "CMA-ES", "paper"),
@@ -330,8 +332,9 @@ SUITES: dict[str, Suite] = {
         Suite(
             "robotics",
             ROBOTICS_ENVS,
-            ((("denfac_her", "sac", "td3", *_MATCHED), _FIVE),),
-            "goal-conditioned arm tasks with hindsight goals (HerReplayBuffer): DENFAC's zoo entry against SB3's SAC and "
+            ((("denfac_her", "soft_denfac_her", "sac", "td3", *_MATCHED), _FIVE),),
+            "goal-conditioned arm tasks with hindsight goals (HerReplayBuffer): DENFAC's and SoftDENFAC's zoo entries "
+            "against SB3's SAC and "
             "TD3 with the zoo's HER settings, at one gradient step per env step and on DENFAC's schedule; success rate "
             "against episodes, episodes to 90% success, CPU per run",
             study="robotics",
