@@ -110,6 +110,15 @@ ALGOS: dict[str, Algo] = {
             base="denfac_rho2",
             overrides=(("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True})),
         ),
+        # the same with SAC's actor (SoftDENFAC): the screen's `soft_crossq` (research/frontier_critics)
+        Algo(
+            "soft_crossq",
+            "soft_denfac",
+            "SoftDENFAC (rho 2, CrossQ's critic)",
+            "paper",
+            base="denfac_rho2",
+            overrides=(("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True})),
+        ),
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
         Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
@@ -318,7 +327,7 @@ SUITES: dict[str, Suite] = {
             "mujoco100k",
             MUJOCO100K_ENVS,
             (
-                (("denfac_default", "denfac_rho2", "denfac_data_efficient", "denfac_crossq"), _FIVE),
+                (("denfac_default", "denfac_rho2", "denfac_data_efficient", "denfac_crossq", "soft_crossq"), _FIVE),
                 (("sac_zoo",), (0, 1)),
                 (("crossq_zoo",), (0,)),
             ),
