@@ -208,7 +208,7 @@ ROW_COLOURS = {
     "denfac_default": "black",
     "denfac_rho2": "tab:orange",
     "denfac_crossq": "darkviolet",
-    "soft_crossq": "tab:green",
+    "soft_crossq": "darkgreen",
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",
     "crossq_zoo": "tab:purple",
