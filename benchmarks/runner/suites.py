@@ -46,6 +46,8 @@ class Algo:
 #: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC
 #: (``"denfac"``: ``benchmarks.runner.hyperparams.denfac_critic_steps_per_episode``).
 MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
+#: CrossQ's critic in the fitted iterations: batch renorm, each critic step bootstrapping from itself.
+CROSSQ_CRITIC = (("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True}))
 #: A high update-to-data ratio, as DroQ and REDQ use (20 gradient steps per environment step).
 HIGH_UTD = (("train_freq", 1), ("gradient_steps", 20))
 
@@ -108,7 +110,7 @@ ALGOS: dict[str, Algo] = {
             "DENFAC (rho 2, CrossQ's critic)",
             "paper",
             base="denfac_rho2",
-            overrides=(("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True})),
+            overrides=CROSSQ_CRITIC,
         ),
         # the same with SAC's actor (SoftDENFAC): the screen's `soft_crossq` (research/frontier_critics)
         Algo(
@@ -117,7 +119,7 @@ ALGOS: dict[str, Algo] = {
             "SoftDENFAC (rho 2, CrossQ's critic)",
             "paper",
             base="denfac_rho2",
-            overrides=(("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True})),
+            overrides=CROSSQ_CRITIC,
         ),
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
