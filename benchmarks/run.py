@@ -1,8 +1,9 @@
 """The benchmark runner: (row, env, seed) cells, each trained for a budget of episodes; resumable, local or on Ray.
 
 Cells come from a suite (``--suite figure3``, ``generalisation``, ``matched``, ``ablation``...:
-``benchmarks/runner/suites.py``) and/or ``--algos/--envs/--seeds``. Each run is appended, when it ends, to the study's
-compact runs file ``<results>/runs.jsonl.gz``; a rerun skips the cells already there, so an interrupted sweep resumes
+``benchmarks/runner/suites.py``; the rows: ``benchmarks/runner/algos.py``) and/or ``--algos/--envs/--seeds``. Each run
+is appended, when it ends, to the study's compact runs file ``<results>/runs.jsonl.gz``; a rerun skips the cells
+already there, so an interrupted sweep resumes
 where it stopped (the sweep: ``benchmarks/runner/sweep.py``). The console gets a line per finished cell and a short
 summary; the report of the suite run (``<results>/<suite>.md`` and its figures; ``all_runs.md`` for cells outside a
 suite) goes to its file, and the study's other reports are left as they are (``python -m benchmarks.reports.analysis``
@@ -31,6 +32,7 @@ from typing import Any
 
 from benchmarks.reports.analysis import report_of_run
 from benchmarks.runner import suites
+from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.sweep import check_device, default_results_dir, parse_episodes, select_cells, sweep
 
 
@@ -66,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--suite", default=None, help=f"one of {list(suites.SUITES)}")
-    rows = [a for a, row in suites.ALGOS.items() if row.family != "ablation"]
+    rows = [a for a, row in ALGOS.items() if row.family != "ablation"]
     parser.add_argument(
         "--algos", nargs="+", default=None, help=f"rows: {rows}, or abl:<config> (benchmarks/configs/ablation.yml)"
     )

@@ -24,6 +24,7 @@ from benchmarks.reports import stats as st
 from benchmarks.reports import verdicts
 from benchmarks.runner import store, suites
 from benchmarks.runner import sweep as sweeps
+from benchmarks.runner.algos import ABLATION_ROWS, ALGOS
 from benchmarks.runner.hyperparams import denfac_critic_steps_per_episode, load_hyperparams
 from sb3_denfac.common.callbacks import EpisodePerformanceCallback
 from sb3_denfac.envs.facts import env_facts
@@ -226,7 +227,7 @@ def test_ablation_rows_are_the_yaml_rows():
     """The suite ``ablation`` is configs/ablation.yml: its rows in the file's order, its budgets and seeds."""
     import yaml
 
-    content = yaml.safe_load(suites.ABLATION_ROWS.read_text())
+    content = yaml.safe_load(ABLATION_ROWS.read_text())
     ablation = suites.SUITES["ablation"]
     assert ablation.algos == [f"abl:{name}" for name in content["rows"]] and len(ablation.algos) == 79
     assert dict(ablation.budgets)["pendulum"] == suites.Budget(40, 10, 0) and ablation.seeds("abl:soft") == (0, 1, 2)
@@ -234,7 +235,7 @@ def test_ablation_rows_are_the_yaml_rows():
     assert source == "ablation.yml[soft+min+K20] + the env's gamma 0.9"
     assert (params["critic_target"], params["n_fitted_iterations"], params["gamma"]) == ("min", 20, 0.9)
     # the soft actor's rows are SoftDENFAC's (algo: soft_denfac, inherited from the row `soft`), with its arguments only
-    assert suites.ALGOS["abl:soft+min+K20"].zoo_algo == "soft_denfac" and suites.ALGOS["abl:default05"].zoo_algo == "denfac"
+    assert ALGOS["abl:soft+min+K20"].zoo_algo == "soft_denfac" and ALGOS["abl:default05"].zoo_algo == "denfac"
     from sb3_denfac.zoo import make_model
 
     model = make_model("soft_denfac", "Pendulum-v1", params)
@@ -428,7 +429,7 @@ def test_matched_schedule_peers_take_denfacs_gradient_steps(tmp_path):
     assert source.startswith("sac.yml[Pendulum-v1]") and "gradient_steps=500" in source
     assert load_hyperparams("td3_matched", "acrobot")[0]["gamma"] == 0.9  # the base row's env gamma is kept
     for row in ("sac_matched", "td3_matched", "sac_utd20"):  # everything else is the base row's
-        base = load_hyperparams(suites.ALGOS[row].base, "cartpole")[0]
+        base = load_hyperparams(ALGOS[row].base, "cartpole")[0]
         mine = load_hyperparams(row, "cartpole")[0]
         assert {k: v for k, v in mine.items() if k not in ("train_freq", "gradient_steps")} == {
             k: v for k, v in base.items() if k not in ("train_freq", "gradient_steps")
@@ -530,7 +531,6 @@ def test_answer_table_reports_data_and_cpu_to_the_level():
     import pandas as pd
 
     from benchmarks.reports import tables
-    from benchmarks.runner.suites import ALGOS
 
     rows = []
     for seed, returns in enumerate(([500.0, 1000.0, 1000.0], [200.0, 300.0, 400.0])):
@@ -554,7 +554,6 @@ def test_survival_bonus_separates_standing_from_moving(tmp_path):
     forward and falls can have the same return; the reports give the part beyond the bonus, which tells them apart."""
     from benchmarks.reports import analysis, tables
     from benchmarks.runner import store
-    from benchmarks.runner.suites import ALGOS
 
     def record(algo, returns, lengths):
         n, clock = len(returns), [float(i) for i in range(1, len(returns) + 1)]

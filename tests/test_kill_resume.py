@@ -144,12 +144,12 @@ def test_benchmark_run_killed_mid_way_resumes_from_its_checkpoint(tmp_path: Path
     saved = load_checkpoint(folder)
     assert saved is not None and 3 <= len(saved["records"]) < episodes
     assert not store.read_runs(killed)  # the run had not finished
-    from benchmarks.runner import suites
+    from benchmarks.runner.algos import ALGOS
     from benchmarks.runner.checkpoints import resume_model
     from benchmarks.runner.hyperparams import load_hyperparams
     from sb3_denfac.zoo import make_model
 
-    fresh = make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", load_hyperparams(algo, "pendulum")[0])
+    fresh = make_model(ALGOS[algo].zoo_algo, "Pendulum-v1", load_hyperparams(algo, "pendulum")[0])
     model = resume_model(fresh, folder, saved, "cpu")  # what the rerun trains on: the killed run's model and data
     steps_then = saved["records"][-1]["timesteps"]
     assert model.num_timesteps == model.replay_buffer.size() == steps_then and model._n_updates > 0
@@ -191,7 +191,7 @@ def test_every_benchmark_row_saves_and_resumes_its_run(tmp_path: Path, algo: str
     """Each algorithm of the sweep checkpoints after an episode's update and trains on from the checkpoint."""
     from stable_baselines3.common.callbacks import CallbackList
 
-    from benchmarks.runner import suites
+    from benchmarks.runner.algos import ALGOS
     from benchmarks.runner.checkpoints import RunCheckpoint, load_checkpoint, resume_model
     from benchmarks.runner.hyperparams import load_hyperparams
     from sb3_denfac.common.callbacks import EpisodePerformanceCallback
@@ -200,7 +200,7 @@ def test_every_benchmark_row_saves_and_resumes_its_run(tmp_path: Path, algo: str
     hyperparams = {**load_hyperparams(algo, "pendulum")[0], "learning_starts": 50}
     if algo not in ("denfac", "ddpg", "sac", "crossq"):
         hyperparams.pop("learning_starts")
-    build = lambda: make_model(suites.ALGOS[algo].zoo_algo, "Pendulum-v1", hyperparams, seed=0)  # noqa: E731
+    build = lambda: make_model(ALGOS[algo].zoo_algo, "Pendulum-v1", hyperparams, seed=0)  # noqa: E731
     model, performance = build(), EpisodePerformanceCallback(max_episodes=2)
     checkpoint = RunCheckpoint(tmp_path, 0.0, lambda: {"episodes": performance.n_episodes})
     model.learn(10_000, callback=CallbackList([performance, checkpoint]))

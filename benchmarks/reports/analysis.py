@@ -33,7 +33,8 @@ from benchmarks.reports.tables import (
     settings_table,
 )
 from benchmarks.runner import store
-from benchmarks.runner.suites import ALGOS, ROBOTICS_ENVS, SUITES, Suite
+from benchmarks.runner.algos import ALGOS
+from benchmarks.runner.suites import ROBOTICS_ENVS, SUITES, Suite
 from sb3_denfac.common.performance import fall_back_fraction
 from sb3_denfac.envs.facts import env_facts
 

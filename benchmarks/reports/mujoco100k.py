@@ -27,7 +27,8 @@ import pandas as pd
 
 from benchmarks.reports.tables import env_order, provenance, provenance_line
 from benchmarks.runner import store
-from benchmarks.runner.suites import ALGOS, MUJOCO100K_ENVS
+from benchmarks.runner.algos import ALGOS
+from benchmarks.runner.suites import MUJOCO100K_ENVS
 
 _BENCHMARKS = Path(__file__).resolve().parents[1]
 FRONTIER_CSV = _BENCHMARKS / "configs" / "frontier_100k.csv"

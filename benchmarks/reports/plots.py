@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.runner.suites import ALGOS
+from benchmarks.runner.algos import ALGOS
 from sb3_denfac.envs.facts import env_facts
 
 

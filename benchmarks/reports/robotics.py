@@ -27,7 +27,8 @@ import pandas as pd
 from benchmarks.reports.stats import median_reached
 from benchmarks.reports.tables import env_order, missing_cells, provenance, provenance_line
 from benchmarks.runner import store
-from benchmarks.runner.suites import ALGOS, ROBOTICS_ENVS, SUITES
+from benchmarks.runner.algos import ALGOS
+from benchmarks.runner.suites import ROBOTICS_ENVS, SUITES
 
 _BENCHMARKS = Path(__file__).resolve().parents[1]
 LEVEL = 0.9  # the success rate the issue counts episodes to

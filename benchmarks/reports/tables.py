@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.runner import suites
-from benchmarks.runner.suites import ALGOS, SUITES, Suite, estimated_cost
+from benchmarks.runner.algos import ALGOS
+from benchmarks.runner.suites import SUITES, Suite, estimated_cost
 from sb3_denfac.envs.facts import env_facts
 
 #: The rows of the user's answer (suite ``matched``): DENFAC's default (its soft actor, its data-efficient preset) against

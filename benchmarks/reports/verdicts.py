@@ -10,7 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 from benchmarks.reports import stats as st
-from benchmarks.runner.suites import ALGOS
+from benchmarks.runner.algos import ALGOS
 from sb3_denfac.envs.facts import env_facts
 
 PAPER_ENVS = ["acrobot", "cartpole", "halfcheetah", "acrobot75"]  # acrobot75: the authors' episode length

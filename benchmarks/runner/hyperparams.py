@@ -1,6 +1,6 @@
 """The hyperparameters of a benchmark row on an env (``load_hyperparams``), and where they come from.
 
-A row (``benchmarks.runner.suites.ALGOS``) states its settings in one of three ways: a zoo-style YAML file ``<row>.yml`` (the
+A row (``benchmarks.runner.algos.ALGOS``) states its settings in one of three ways: a zoo-style YAML file ``<row>.yml`` (the
 package's ``hyperparams/`` or ``benchmarks/configs/``), another row with overrides on top, or a row of a row file (the
 ablation's ``benchmarks/configs/ablation.yml``, :mod:`benchmarks.runner.rows`).
 """
@@ -15,7 +15,8 @@ from typing import Any
 import yaml
 
 from benchmarks.runner import rows as row_files
-from benchmarks.runner.suites import ALGOS, BENCHMARK_CONFIGS_DIR, HYPERPARAMS_OF, PACKAGE_HYPERPARAMS_DIR, Algo
+from benchmarks.runner.algos import ALGOS, BENCHMARK_CONFIGS_DIR, PACKAGE_HYPERPARAMS_DIR, Algo
+from benchmarks.runner.suites import HYPERPARAMS_OF
 from sb3_denfac.envs.facts import env_facts
 
 

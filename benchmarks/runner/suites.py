@@ -1,11 +1,12 @@
-"""What the benchmark runs: algorithms (rows), per-env budgets and suites.
+"""What the benchmark runs: per-env budgets and suites.
 
-An *algorithm* here is a benchmark row: a zoo algorithm plus a YAML file (``denfac`` and ``denfac_default`` are the
-same class with different files). A *suite* is a set of (algorithm, env, seed) cells; suites share their runs, so a
-cell that two suites contain is trained once. The hyperparameters of a row on an env: ``benchmarks.runner.hyperparams``.
+A *suite* is a set of (algorithm, env, seed) cells, an algorithm being a benchmark row (``benchmarks.runner.algos``);
+suites share their runs, so a cell that two suites contain is trained once. The hyperparameters of a row on an env:
+``benchmarks.runner.hyperparams``.
 
-The ablation's rows (``abl:<name>``) and its suite are data, ``configs/ablation.yml``: this module reads their names and
-budgets, ``benchmarks.runner.hyperparams`` their settings (through ``benchmarks.runner.rows``).
+The ablation's suite is data, ``configs/ablation.yml``: this module reads its budgets, seeds and description,
+``benchmarks.runner.algos`` the ablation's rows (``abl:<name>``), ``benchmarks.runner.hyperparams`` their settings
+(through ``benchmarks.runner.rows``).
 """
 
 from __future__ import annotations
@@ -17,168 +18,11 @@ from typing import Any
 
 import yaml
 
-from benchmarks.runner import rows as row_files
+from benchmarks.runner.algos import ABLATION_ALGOS, ABLATION_ROWS, ALGOS
 
 _BENCHMARKS = Path(__file__).resolve().parents[1]
-PACKAGE_HYPERPARAMS_DIR = _BENCHMARKS.parent / "hyperparams"  # the package's zoo YAML files (sb3_denfac.hyperparams)
-BENCHMARK_CONFIGS_DIR = _BENCHMARKS / "configs"  # YAML of benchmark-only rows (e.g. denfac_default)
-ABLATION_ROWS = BENCHMARK_CONFIGS_DIR / "ablation.yml"  # the ablation's rows and suite, as data
 # estimated CPU seconds per run, written by benchmarks.studies.cost
 SWEEP_PLAN = _BENCHMARKS / "results" / "cost" / "sweep_plan.csv"
-
-
-@dataclass(frozen=True)
-class Algo:
-    """A benchmark row: ``zoo_algo`` with the settings of ``<name>.yml`` (the zoo's lookup), or of another row
-    (``base``) with ``overrides`` on top, or of the row ``row`` of the row file ``rows_file`` (the ablation's,
-    :mod:`benchmarks.runner.rows`); ``label`` for tables. ``benchmarks.runner.hyperparams.load_hyperparams`` resolves them."""
-
-    name: str
-    zoo_algo: str
-    label: str
-    family: str  # "paper" (the paper's Figure 3 algorithms), "peer" (what users pick today), "ablation"
-    base: str | None = None
-    overrides: tuple[tuple[str, Any], ...] = ()
-    rows_file: Path | None = None
-    row: str | None = None
-
-
-#: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC
-#: (``"denfac"``: ``benchmarks.runner.hyperparams.denfac_critic_steps_per_episode``).
-MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
-#: CrossQ's critic in the fitted iterations: batch renorm, each critic step bootstrapping from itself.
-CROSSQ_CRITIC = (("frozen_targets", False), ("policy_kwargs", {"batch_renorm": True}))
-#: A high update-to-data ratio, as DroQ and REDQ use (20 gradient steps per environment step).
-HIGH_UTD = (("train_freq", 1), ("gradient_steps", 20))
-
-ALGOS: dict[str, Algo] = {
-    a.name: a
-    for a in (
-        Algo("denfac", "denfac", "DENFAC (faithful)", "paper"),
-        Algo("denfac_default", "denfac", "DENFAC (default)", "paper"),
-        # 0.4's default (the two critics' minimum, deterministic next actions): the sweep's "DENFAC (default)" runs
-        # made before 0.5 changed the default, kept under this name
-        Algo(
-            "denfac_default04",
-            "denfac",
-            "DENFAC (0.4 default)",
-            "paper",
-            base="denfac_default",
-            overrides=(("critic_target", "min"), ("target_policy_noise", 0.0)),
-        ),  # fmt: skip
-        # The soft actor (SoftDENFAC, zoo name soft_denfac; the 0.5 development builds' DENFAC(ent_coef="auto")): SAC's
-        # squashed Gaussian actor and soft targets inside the fitted iterations, with the targets' bootstrap value
-        # bounded (bootstrap_bounds; research/ablation/journal.md, 23-24)
-        Algo(
-            "denfac_soft",
-            "soft_denfac",
-            "DENFAC, soft actor",
-            "paper",
-            base="denfac_default",
-            overrides=(("ent_coef", "auto"), ("bootstrap_bounds", True)),
-        ),  # fmt: skip
-        # the soft actor with the critics' minimum in its targets and 20 fitted iterations of 25 critic and 12 actor
-        # steps (the same steps per episode, targets refreshed twice as often; research/ablation/journal.md, 25)
-        Algo(
-            "denfac_soft_min",
-            "soft_denfac",
-            "DENFAC, soft actor, min targets, K = 20",
-            "paper",
-            base="denfac_soft",
-            overrides=(
-                ("critic_target", "min"),
-                ("n_fitted_iterations", 20),
-                ("critic_steps", 25),
-                ("actor_steps", 12),
-            ),
-        ),  # fmt: skip
-        # the compute dial's data-efficient end (sb3_denfac.denfac.presets.DATA_EFFICIENT; configs/)
-        Algo("denfac_data_efficient", "denfac", "DENFAC (data-efficient preset)", "paper"),
-        # the dial's middle point: the preset at half its compute (presets.data_efficient(update_to_data_ratio=2))
-        Algo(
-            "denfac_rho2",
-            "denfac",
-            "DENFAC (dial at rho 2)",
-            "paper",
-            base="denfac_data_efficient",
-            overrides=(("update_to_data_ratio", 2.0),),
-        ),  # fmt: skip
-        # the preset's candidate (research/frontier_critics): rho 2 with CrossQ's critic (batch renorm, no frozen copy)
-        Algo(
-            "denfac_crossq",
-            "denfac",
-            "DENFAC (rho 2, CrossQ's critic)",
-            "paper",
-            base="denfac_rho2",
-            overrides=CROSSQ_CRITIC,
-        ),
-        # the same with SAC's actor (SoftDENFAC): the screen's `soft_crossq` (research/frontier_critics)
-        Algo(
-            "soft_crossq",
-            "soft_denfac",
-            "SoftDENFAC (rho 2, CrossQ's critic)",
-            "paper",
-            base="denfac_rho2",
-            overrides=CROSSQ_CRITIC,
-        ),
-        # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
-        # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
-        Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),
-        # the same with SAC's actor (hyperparams/soft_denfac.yml: presets.GOALS' values, SoftDENFAC's bounds)
-        Algo("soft_denfac_her", "soft_denfac", "SoftDENFAC + HER (zoo entry)", "paper", base="soft_denfac"),
-        Algo("nfac", "nfac", "NFAC+", "paper"),
-        Algo("cacla", "cacla", "CACLA+", "paper"),
-        Algo("cmaes", "cmaes", "CMA-ES", "paper"),
-        Algo("ddpg", "ddpg", "DDPG (paper's)", "paper"),
-        Algo("td3", "td3", "SB3 TD3", "peer"),
-        Algo("sac", "sac", "SB3 SAC", "peer"),
-        Algo("crossq", "crossq", "sb3-contrib CrossQ", "peer"),
-        # the RL Zoo's MuJoCo settings (its `HalfCheetah-v3: &mujoco-defaults` entry: 10k random warm-up steps, then
-        # SB3's defaults, one gradient step per env step), for the field's 100k-step budget; the `sac` row keeps the
-        # short warm-up of the episode budgets
-        Algo(
-            "sac_zoo", "sac", "SB3 SAC (RL Zoo MuJoCo settings)", "peer", base="sac", overrides=(("learning_starts", 10_000),)
-        ),
-        # the frontier peer at the field's budget: sb3-contrib's CrossQ with the RL Zoo's MuJoCo settings (its
-        # `HalfCheetah-v4: &mujoco-defaults` entry: 5k random warm-up steps, step size 1e-3, actor delay 3, a 256-256
-        # actor and a 2048-2048 batch-renormalised critic, one gradient step per env step); about 260 ms per env step
-        # on one core of this project's machine, so a 100k-step run is ~7 CPU hours (checkpointed: --checkpoint-every)
-        Algo(
-            "crossq_zoo",
-            "crossq",
-            "sb3-contrib CrossQ (RL Zoo MuJoCo settings)",
-            "peer",
-            base="crossq",
-            overrides=(
-                ("learning_starts", 5_000),
-                ("learning_rate", 1e-3),
-                ("policy_delay", 3),
-                ("policy_kwargs", {"net_arch": {"pi": [256, 256], "qf": [2048, 2048]}}),
-            ),
-        ),
-        Algo("sac_matched", "sac", "SB3 SAC on DENFAC's schedule", "peer", base="sac", overrides=MATCHED_SCHEDULE),
-        Algo("td3_matched", "td3", "SB3 TD3 on DENFAC's schedule", "peer", base="td3", overrides=MATCHED_SCHEDULE),
-        Algo("sac_utd20", "sac", "SB3 SAC, 20 steps per env step", "peer", base="sac", overrides=HIGH_UTD),
-        # DENFAC's ingredients taken into SAC on DENFAC's schedule (the diagnosis; TD3 is SAC without its entropy term
-        # and stochastic actor): DENFAC's width, and targets frozen for 50 critic steps as in one fitted iteration
-        Algo(
-            "sac_matched_64",
-            "sac",
-            "SAC on DENFAC's schedule, 64-64",
-            "peer",
-            base="sac_matched",
-            overrides=(("policy_kwargs", {"net_arch": [64, 64]}),),
-        ),  # fmt: skip
-        Algo(
-            "sac_matched_frozen",
-            "sac",
-            "SAC on DENFAC's schedule, targets frozen 50 steps",
-            "peer",
-            base="sac_matched",
-            overrides=(("tau", 1.0), ("target_update_interval", 50)),
-        ),  # fmt: skip
-    )
-}
 
 
 @dataclass(frozen=True)
@@ -386,29 +230,20 @@ def estimated_cost(algo: str, env: str) -> float:
     return _cost_table().get((algo, env), float("nan"))
 
 
-def _ablation() -> tuple[dict[str, Algo], Suite]:
-    """The ablation's rows ``abl:<name>`` and its suite (study ``ablation``), as ``configs/ablation.yml`` states them."""
-    content = yaml.safe_load(ABLATION_ROWS.read_text())
-    study = content["suite"]
-    rows = {
-        f"abl:{name}": Algo(
-            f"abl:{name}", row_files.algorithm(content["rows"], name), name, "ablation", rows_file=ABLATION_ROWS, row=name
-        )
-        for name in content["rows"]
-    }
+def _ablation() -> Suite:
+    """The ablation's suite (study ``ablation``) of its rows ``abl:<name>``, as ``configs/ablation.yml`` states it."""
+    study = yaml.safe_load(ABLATION_ROWS.read_text())["suite"]
     budgets = tuple((env, Budget(**budget)) for env, budget in study["budgets"].items())
-    suite = Suite(
+    return Suite(
         "ablation",
         tuple(env for env, _ in budgets),
-        ((tuple(rows), tuple(study["seeds"])),),
+        ((tuple(ABLATION_ALGOS), tuple(study["seeds"])),),
         " ".join(study["description"].split()),
         study="ablation",
         budgets=budgets,
         diagnostics_every=study["diagnostics_every"],
     )
-    return rows, suite
 
 
-ABLATION_ALGOS, _ABLATION_SUITE = _ablation()
-ALGOS.update(ABLATION_ALGOS)
+_ABLATION_SUITE = _ablation()
 SUITES[_ABLATION_SUITE.name] = _ABLATION_SUITE

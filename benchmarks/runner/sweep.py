@@ -23,6 +23,7 @@ from typing import Any
 
 from benchmarks.runner import checkpoints, executors, store, suites
 from benchmarks.runner import task as task_module
+from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.hyperparams import load_hyperparams
 
 #: The committed studies (``benchmarks/results/<study>/``): written only when ``--results`` names one of them.
@@ -84,9 +85,9 @@ def select_cells(
         ]
     if not (algos and envs and seeds is not None):
         raise ValueError("give --suite, or --algos, --envs and --seeds")
-    unknown = [a for a in algos if a not in suites.ALGOS]
+    unknown = [a for a in algos if a not in ALGOS]
     if unknown:
-        raise ValueError(f"unknown --algos {unknown}; choose from {list(suites.ALGOS)}")
+        raise ValueError(f"unknown --algos {unknown}; choose from {list(ALGOS)}")
     return [(a, e, int(s)) for s in seeds for e in envs for a in algos]
 
 
@@ -151,7 +152,7 @@ def sweep(
         hyperparams, source = load_hyperparams(algo, env, hyperparams_dirs)
         task = {
             "algo": algo,
-            "zoo_algo": suites.ALGOS[algo].zoo_algo,
+            "zoo_algo": ALGOS[algo].zoo_algo,
             "hyperparams": hyperparams,
             "hyperparams_source": source,
             "git": git,

@@ -29,6 +29,7 @@ import pandas as pd
 
 from benchmarks.reports import analysis as fa
 from benchmarks.runner import store, suites
+from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.sweep import sweep
 from sb3_denfac.envs.facts import env_facts
 
@@ -140,7 +141,7 @@ def plan(cost_dir: Path = COST_DIR, sweep_dir: Path = SWEEP_DIR) -> pd.DataFrame
         "",
     ]
     est = costs.pivot(index="algo", columns="env", values="estimate")
-    est = est.reindex(index=[a for a in suites.ALGOS if a in est.index], columns=[e for e in suites.ENVS if e in est.columns])
+    est = est.reindex(index=[a for a in ALGOS if a in est.index], columns=[e for e in suites.ENVS if e in est.columns])
     lines += [
         "Estimated CPU seconds per full run (budget of each env):",
         "",
@@ -180,7 +181,7 @@ def plan(cost_dir: Path = COST_DIR, sweep_dir: Path = SWEEP_DIR) -> pd.DataFrame
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    rows = [a for a, row in suites.ALGOS.items() if row.family != "ablation"]
+    rows = [a for a, row in ALGOS.items() if row.family != "ablation"]
     parser.add_argument("--algos", nargs="+", default=rows)
     parser.add_argument("--envs", nargs="+", default=list(suites.ENVS))
     parser.add_argument("--plan-only", action="store_true")

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.runner import suites
+from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.hyperparams import load_hyperparams
 from benchmarks.runner.task import git_state, machine_info
 
@@ -42,7 +43,7 @@ def worker(algo: str, env: str, device: str, seconds: float, seed: int) -> dict[
 
     torch.set_num_threads(1)
     hyperparams, _ = load_hyperparams(algo, env)
-    model = make_model(suites.ALGOS[algo].zoo_algo, env_facts(env).gym_id, hyperparams, seed=seed, device=device)
+    model = make_model(ALGOS[algo].zoo_algo, env_facts(env).gym_id, hyperparams, seed=seed, device=device)
     warm_up = int(getattr(model, "learning_starts", 0)) + 1
 
     class Window(BaseCallback):
@@ -84,7 +85,7 @@ def table(records: list[dict[str, Any]], steps: int) -> str:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", default="crossq", choices=[a for a, r in suites.ALGOS.items() if r.family != "ablation"])
+    parser.add_argument("--algo", default="crossq", choices=[a for a, r in ALGOS.items() if r.family != "ablation"])
     parser.add_argument("--envs", nargs="+", default=["acrobot"], choices=suites.ENVS)
     parser.add_argument("--copies", type=int, default=1, help="processes per env, all side by side")
     parser.add_argument("--device", default="cpu", help="torch device: cpu or cuda")

@@ -26,7 +26,7 @@ Variants (each DENFAC + SB3's ``HerReplayBuffer``, ``n_sampled_goal`` 4, "future
 And the robotics suite's peers on DENFAC's schedule, built as the suite builds them: ``sac_matched``,
 ``td3_matched`` (SB3's SAC and TD3 + HER): the row's settings on PandaReach-v3 from
 ``benchmarks.runner.hyperparams.load_hyperparams`` (``hyperparams/sac.yml`` / ``td3.yml``, entry ``PandaReach-v3``,
-with ``suites.MATCHED_SCHEDULE`` on top: ``train_freq=(1, "episode")``, ``gradient_steps=500``), the env and model
+with ``algos.MATCHED_SCHEDULE`` on top: ``train_freq=(1, "episode")``, ``gradient_steps=500``), the env and model
 from ``sb3_denfac.zoo.make_model`` as ``benchmarks.runner.task.run_one`` does (the zoo's ``VecNormalize``, its action
 noise; one torch thread), with ``SeededResets`` added as the entry's ``env_wrapper`` for the seeded training goals.
 The test episodes see the observations normalised with the model's statistics, as the suite's evaluation does.
@@ -77,7 +77,7 @@ PLAIN = {
     "soft_warmup": (SoftDENFAC, dict(learning_starts=100)),
     "soft_alpha01": (SoftDENFAC, dict(ent_coef="auto_0.1")),
 }
-#: the robotics suite's rows run here as that suite builds them (``benchmarks.runner.suites.ALGOS``)
+#: the robotics suite's rows run here as that suite builds them (``benchmarks.runner.algos.ALGOS``)
 SUITE_ROWS = ("sac_matched", "td3_matched")
 
 
@@ -129,8 +129,8 @@ def suite_row(row: str, seed: int) -> tuple:
     one addition is the entry's ``env_wrapper``: ``SeededResets`` from ``seed * 1000``, as the other variants' env."""
     import torch
 
+    from benchmarks.runner.algos import ALGOS
     from benchmarks.runner.hyperparams import load_hyperparams
-    from benchmarks.runner.suites import ALGOS
     from sb3_denfac.zoo import make_model
 
     torch.set_num_threads(1)  # as run_one (DENFAC's learn() takes one thread by default)

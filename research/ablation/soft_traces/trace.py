@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
 import sb3_denfac.envs  # noqa: F401  (the paper's env ids)
-from benchmarks.runner import suites
+from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.hyperparams import load_hyperparams
 from sb3_denfac.envs.facts import env_facts
 from sb3_denfac.soft_denfac import SoftDENFACPolicy
@@ -62,7 +62,7 @@ def main(config: str, env_name: str, seed: int, episodes: int, out: str) -> None
     th.set_num_threads(1)
     kwargs, _ = load_hyperparams(f"abl:{config}", env_name)  # the benchmark row's, with the env's gamma
     kwargs.pop("policy")
-    algo = algorithm_class(suites.ALGOS[f"abl:{config}"].zoo_algo)  # DENFAC, or SoftDENFAC for the soft rows
+    algo = algorithm_class(ALGOS[f"abl:{config}"].zoo_algo)  # DENFAC, or SoftDENFAC for the soft rows
     model = algo("MlpPolicy", Monitor(gym.make(env_facts(env_name).gym_id)), seed=seed, **kwargs)
     trace = Trace(episodes)
     model.learn(10**8, callback=trace)
