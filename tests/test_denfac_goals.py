@@ -145,7 +145,7 @@ def test_the_plain_call_on_a_goal_env_with_her_takes_the_goals_preset() -> None:
     without = DENFAC("MultiInputPolicy", point_reach())
     assert (without.gamma, without.update_to_data_ratio, without.actor_proximal) == (0.99, None, 1.0)
     soft = SoftDENFAC("MultiInputPolicy", point_reach(), replay_buffer_class=HerReplayBuffer)
-    assert soft.gamma == 0.95 and "actor_proximal" not in soft.goal_settings_taken  # SAC's actor has no anchor
+    assert soft.gamma == 0.95 and soft.actor_proximal == 0.0  # the preset's value, SoftDENFAC's default too
     model = DENFAC("MultiInputPolicy", point_reach(), seed=0, **presets.GOALS).learn(20)
     assert model.gamma == 0.95 and isinstance(model.replay_buffer, DENFACHerReplayBuffer)
 

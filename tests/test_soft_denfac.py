@@ -49,7 +49,7 @@ def test_denfac_has_no_soft_actor_arguments(target_action_env):
     for kwargs in (dict(ent_coef="auto"), dict(target_entropy=-1.0)):
         with pytest.raises(TypeError, match="unexpected keyword"):
             DENFAC("MlpPolicy", target_action_env(), **kwargs)
-    for kwargs in (dict(sigma=0.2), dict(weighting="retrace"), dict(actor_proximal=1.0), dict(target_policy_noise=0.1)):
+    for kwargs in (dict(sigma=0.2), dict(weighting="retrace"), dict(target_policy_noise=0.1)):
         with pytest.raises(TypeError, match=f"^SoftDENFAC does not take {next(iter(kwargs))}: "):
             SoftDENFAC("MlpPolicy", target_action_env(), **kwargs)
 
@@ -158,6 +158,41 @@ def test_fast_and_plain_updaters_agree(soft_model):
     assert isinstance(soft_model(update_path="fast", **kwargs).make_updater(), FastUpdater)
     for plain, fast in assert_one_update_agrees(lambda path: soft_model(update_path=path, **kwargs), 10, trained=5):
         # rel 1e-5: one scalar, moved by one update's alpha steps on both paths' log-probabilities (measured <= 1e-7)
+        assert plain.policy.log_ent_coef.item() == pytest.approx(fast.policy.log_ent_coef.item(), rel=1e-5)
+
+
+def test_the_proximal_anchor_holds_the_soft_actors_mean(soft_model):
+    """``actor_proximal``: SAC's objective normalised by the mean norm of dQ/da, plus lambda times the squared move of
+    the deterministic action tanh(m(s)) from the update's start. A huge lambda keeps the mean where the update began; 0
+    is SAC's objective as written (the actor moves); the anchor's pi_old is a frozen copy, on both updaters."""
+    obs = np.linspace(-1, 1, 128, dtype=np.float32).reshape(-1, 2)
+
+    def mean_move(**kwargs) -> float:
+        model = soft_model(learning_rate=0.01, **kwargs)
+        before = model.predict(obs, deterministic=True)[0]
+        model.learn(10)  # one 10-step episode, then one update
+        assert model._n_updates == 1
+        return float(np.abs(model.predict(obs, deterministic=True)[0] - before).mean())
+
+    free = mean_move(actor_proximal=0.0)
+    for path in ("plain", "fast"):
+        held = mean_move(actor_proximal=1e4, update_path=path)
+        assert free > 0.02 and held < 0.1 * free, (path, free, held)
+    for path in ("plain", "fast"):
+        model = soft_model(actor_proximal=1.0, update_path=path)
+        updater = model.make_updater()
+        assert updater.old_actor is not model.actor and not any(p.requires_grad for p in updater.old_actor.parameters())
+    assert soft_model().make_updater().old_actor is None
+
+
+def test_the_anchor_changes_nothing_at_lambda_zero_and_the_paths_agree_with_it(soft_model):
+    """lambda 0 is SAC's loss unscaled (the same update as before the option); with the anchor, the fast critic
+    steps and the autograd ones agree as without it."""
+    from tests.test_denfac_updaters import assert_one_update_agrees
+
+    kwargs = dict(gamma=0.99, batch_size=32, learning_rate=0.01, actor_proximal=0.5)
+    kwargs["policy_kwargs"] = dict(net_arch=dict(pi=[8], qf=[16, 4]))
+    for plain, fast in assert_one_update_agrees(lambda path: soft_model(update_path=path, **kwargs), 10, trained=5):
         assert plain.policy.log_ent_coef.item() == pytest.approx(fast.policy.log_ent_coef.item(), rel=1e-5)
 
 

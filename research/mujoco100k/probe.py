@@ -74,7 +74,9 @@ def git_commit() -> str:
         return "unknown"
 
 
-def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, every: int, episodes: int) -> dict:
+def run_one(
+    name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, every: int, episodes: int, log: Path | None = None
+) -> dict:
     import torch as th
 
     import sb3_denfac  # noqa: F401 (registers the envs)
@@ -99,6 +101,10 @@ def run_one(name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, 
         model = SAC("MlpPolicy", env, seed=seed, **row)
     else:
         raise ValueError(f"unknown algo {algo!r} in row {name!r}")
+    if log is not None:  # SB3's logger as CSV: the train/ keys of every update (alpha, losses, K), for diagnostics
+        from stable_baselines3.common.logger import configure
+
+        model.set_logger(configure(str(log / f"{name}_{env_id}_{seed}"), ["csv"]))
     callback = StepEvaluations(eval_env, every, episodes)
     cpu, wall = time.process_time(), time.time()
     model.learn(steps, callback=callback)
@@ -144,6 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-every", type=int, default=10_000)
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--out", type=Path, default=HERE / "runs.jsonl")
+    parser.add_argument("--log", type=Path, default=None, help="a folder for each run's SB3 logger output (CSV)")
     parser.add_argument("--rows-file", type=Path, default=ROWS, help="the rows' YAML file (another study's)")
     args = parser.parse_args(argv)
     rows = load_rows(args.rows_file)
@@ -159,7 +166,7 @@ def main(argv: list[str] | None = None) -> None:
             for name in args.rows:
                 if (name, env_id, seed) in done:
                     continue
-                record = run_one(name, rows[name], env_id, seed, args.steps, args.eval_every, args.eval_episodes)
+                record = run_one(name, rows[name], env_id, seed, args.steps, args.eval_every, args.eval_episodes, args.log)
                 with args.out.open("a") as f:
                     f.write(json.dumps(record) + "\n")
                 evals = [round(e["mean"]) for e in record["evaluations"]]

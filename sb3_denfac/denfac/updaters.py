@@ -228,6 +228,16 @@ class Updater(ABC):
         """Called after the K fitted iterations, and before each snapshot of the asynchronous update (idempotent)."""
 
 
+def frozen_copy(actor: nn.Module) -> nn.Module:
+    """A copy of ``actor`` as it is now, frozen in eval mode (its running statistics) and without an optimiser: the
+    proximal actor's pi_old (:mod:`~.options`)."""
+    old = copy.deepcopy(actor)
+    old.optimizer = None
+    old.set_training_mode(False)
+    old.requires_grad_(False)
+    return old
+
+
 class AutogradUpdater(Updater):
     """Autograd on the policy's modules, ``clip_grad_norm_`` and the modules' own ``torch.optim`` optimizers.
 
@@ -244,13 +254,8 @@ class AutogradUpdater(Updater):
         twins = [list(q_net.parameters()) for q_net in policy.critic.q_networks[1:]]
         twin_ids = {id(p) for group in twins for p in group}
         self.clip_groups = [[p for p in policy.critic.parameters() if id(p) not in twin_ids], *twins]
-        self.old_actor: nn.Module | None = None
-        # pi_old: frozen, eval mode (running statistics of the start of the update)
-        if settings.actor_proximal > 0:
-            self.old_actor = copy.deepcopy(policy.actor)
-            self.old_actor.optimizer = None
-            self.old_actor.set_training_mode(False)
-            self.old_actor.requires_grad_(False)
+        # pi_old: the actor at the start of the update
+        self.old_actor = frozen_copy(policy.actor) if settings.actor_proximal > 0 else None
 
     def actor(self, obs: th.Tensor) -> th.Tensor:
         self.policy.actor.set_training_mode(False)

@@ -33,14 +33,19 @@ class SoftDENFAC(DENFAC):
       (eq. 3), drawn anew at every fitted iteration.
 
     What belongs to DENFAC's deterministic actor is not an argument here: the truncated Gaussian's ``sigma``, the
-    importance ``weighting`` of its behaviour density, ``inverting_gradients`` (tanh bounds the actions), the proximal
-    term and TD3's target smoothing (:attr:`PINNED`: each refused by name). ``frozen_targets=False`` (CrossQ's joint
+    importance ``weighting`` of its behaviour density, ``inverting_gradients`` (tanh bounds the actions) and TD3's target
+    smoothing (:attr:`PINNED`: each refused by name). ``frozen_targets=False`` (CrossQ's joint
     bootstrap) takes the soft value: every critic step reads Q(s', a') - alpha log pi(a' | s') at the iteration's
     sampled a'. Why a soft actor inside DENFAC and where it stands against the deterministic one: docs/algorithms.md.
 
     :param ent_coef: alpha, SB3 SAC's ``ent_coef``: "auto" (default; tuned towards ``target_entropy``, from 1),
         "auto_<x>" (tuned, from x) or a float (fixed)
     :param target_entropy: the entropy the tuned alpha steers towards (SAC's eq. 18; "auto": -dim(A))
+    :param actor_proximal: lambda of DENFAC's proximal anchor on the soft actor's deterministic action tanh(m(s)): each
+        actor step minimises SAC's objective divided by the mean norm of dQ/da plus lambda 1/B sum ||tanh(m(s)) -
+        tanh(m_old(s))||^2, m_old the actor's mean at the start of the update (:meth:`~.updaters.SoftActorFit.fit_actor`;
+        the action move at which the two balance is about 1/(2 lambda), whatever the rewards' scale); default 0.0,
+        SAC's objective as written
     :param bootstrap_bounds: clip eq. (4)'s bootstrap value Q_{k-1}(s', a') to the range of discounted returns the
         rewards in D allow, before the entropy term (:mod:`~sb3_denfac.denfac.options`; default True, unlike DENFAC's:
         the soft targets' value estimates grow unbounded without it)
@@ -63,14 +68,11 @@ class SoftDENFAC(DENFAC):
         "sigma": "SAC's actor samples from its own Gaussian (DENFAC's truncated Gaussian's sigma)",
         "weighting": "no importance weights of a behaviour density: c = 1",
         "inverting_gradients": "tanh bounds the actions",
-        "actor_proximal": "SAC's actor objective has no proximal term",
         "target_policy_noise": "the next actions of the targets are sampled from pi",
         "target_noise_clip": "the next actions of the targets are sampled from pi",
     }
     #: the values SoftDENFAC gives them
-    _PINNED_VALUES: ClassVar[dict[str, Any]] = dict(
-        inverting_gradients=False, weighting="none", actor_proximal=0.0, target_policy_noise=0.0
-    )
+    _PINNED_VALUES: ClassVar[dict[str, Any]] = dict(inverting_gradients=False, weighting="none", target_policy_noise=0.0)
 
     def __init__(
         self,
@@ -81,6 +83,7 @@ class SoftDENFAC(DENFAC):
         prioritized: str | dict[str, Any] = "none",
         ent_coef: str | float = "auto",
         target_entropy: str | float = "auto",
+        actor_proximal: float = 0.0,
         policy_kwargs: dict[str, Any] | None = None,
         **kwargs: Any,
     ):
@@ -92,6 +95,7 @@ class SoftDENFAC(DENFAC):
             env,
             bootstrap_bounds=bootstrap_bounds,
             prioritized=prioritized,
+            actor_proximal=actor_proximal,
             policy_kwargs=policy_kwargs,
             **self._PINNED_VALUES,
             **kwargs,
@@ -100,11 +104,18 @@ class SoftDENFAC(DENFAC):
     @classmethod
     def load(cls, path: Any, *args: Any, **kwargs: Any) -> Any:
         """SB3's ``load``; also takes the files of the 0.5 development builds' ``DENFAC(..., ent_coef=...)``, this
-        algorithm before it had its own class (a DENFACPolicy with ``soft_actor`` in its ``policy_kwargs``)."""
+        algorithm before it had its own class (a DENFACPolicy with ``soft_actor`` in its ``policy_kwargs``), whose soft
+        actor had no proximal anchor whatever their ``actor_proximal`` (DENFAC's 1.0): they load with 0."""
         saved = stored_values(path, "policy_class", "policy_kwargs")
         saved_kwargs = saved.get("policy_kwargs")
-        if saved.get("policy_class") is DENFACPolicy and isinstance(saved_kwargs, dict) and saved_kwargs.get("soft_actor"):
-            kwargs["custom_objects"] = {"policy_class": SoftDENFACPolicy, **(kwargs.get("custom_objects") or {})}
+        development_build = saved.get("policy_class") is DENFACPolicy and isinstance(saved_kwargs, dict)
+        development_build = development_build and bool(saved_kwargs.get("soft_actor"))  # type: ignore[union-attr]
+        if development_build:
+            kwargs["custom_objects"] = {
+                "policy_class": SoftDENFACPolicy,
+                "actor_proximal": 0.0,
+                **(kwargs.get("custom_objects") or {}),
+            }
         return super().load(path, *args, **kwargs)
 
     def _setup_model(self) -> None:

@@ -14,7 +14,7 @@ from torch.nn.utils import clip_grad_norm_
 from sb3_denfac.denfac.buffers import n_rows, take
 from sb3_denfac.denfac.fast import FastUpdater
 from sb3_denfac.denfac.update_paths import UpdaterClasses
-from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater
+from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater, frozen_copy
 
 
 class SoftActorFit(Updater):
@@ -23,6 +23,10 @@ class SoftActorFit(Updater):
     def __init__(self, policy: nn.Module, settings: FitSettings, *args, **kwargs):
         super().__init__(policy, settings, *args, **kwargs)  # type: ignore[call-arg]
         self.ent_coef_loss = th.zeros(())  # the last temperature loss (SAC's eq. 18)
+        # the anchor's pi_old, the actor at the start of the update (the autograd updater has made it already)
+        self.old_actor: nn.Module | None = getattr(self, "old_actor", None)
+        if settings.actor_proximal > 0 and self.old_actor is None:
+            self.old_actor = frozen_copy(policy.actor)
 
     @th.no_grad()
     def sample_actor(self, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
@@ -35,9 +39,12 @@ class SoftActorFit(Updater):
     def fit_actor(self, obs: th.Tensor, batches: th.Tensor | None = None) -> th.Tensor:
         """G Adam steps of the actor on SAC's objective (Haarnoja et al. 2018, eq. 7), 1/B sum alpha log pi(a|s) -
         min_j Q_j(s, a) with a ~ pi(.|s) reparameterised (the critics in eval mode), each followed by one step of the
-        tuned alpha (eq. 18, :meth:`~sb3_denfac.soft_denfac.policies.SoftDENFACPolicy.temperature_step`); no proximal
-        term and no inverting gradients (tanh bounds the actions). Step i reads the rows ``batches[i]`` (None: one
-        uniform mini-batch per step, or the full batch); returns the last objective, the negated loss."""
+        tuned alpha (eq. 18, :meth:`~sb3_denfac.soft_denfac.policies.SoftDENFACPolicy.temperature_step`); no inverting
+        gradients (tanh bounds the actions). With ``actor_proximal`` = lambda > 0 the proximal actor's anchor
+        (:mod:`~sb3_denfac.denfac.options`) on the deterministic action: the objective divided by S = 1/B sum ||dQ/da_i||
+        (detached) plus lambda 1/B sum ||tanh(m(s_i)) - tanh(m_old(s_i))||^2, m_old the actor's mean at the start of
+        the update. Step i reads the rows ``batches[i]`` (None: one uniform mini-batch per step, or the full batch);
+        returns the last objective, the negated loss (of SAC's objective, without the anchor)."""
         policy, settings = self.policy, self.settings
         actor, critic = policy.actor, policy.critic
         objective = th.zeros(())
@@ -51,11 +58,21 @@ class SoftActorFit(Updater):
                 idx = batches[step] if batches is not None else self.batch_indices(n_rows(obs))
                 o = take(obs, idx)
                 ent_coef = policy.entropy_coefficient()  # alpha before this step's temperature update, as SB3's SAC
-                actions, log_prob = actor.action_log_prob(o)
+                mean, log_std, _ = actor.get_action_dist_params(o)
+                actions, log_prob = actor.action_dist.log_prob_from_params(mean, log_std)
                 log_prob = log_prob.unsqueeze(1)
-                loss = (ent_coef * log_prob - critic.target_q(o, actions, "min")).mean()
+                q = critic.target_q(o, actions, "min")
+                loss = (ent_coef * log_prob - q).mean()
                 actor.optimizer.zero_grad(set_to_none=True)
-                loss.backward()
+                if self.old_actor is None:
+                    loss.backward()
+                else:
+                    (grad,) = th.autograd.grad(q.sum(), actions, retain_graph=True)  # dQ/da_i per sample
+                    scale = grad.norm(dim=1).mean().clamp(min=1e-12)
+                    with th.no_grad():
+                        old_mean = self.old_actor(o)  # tanh(m_old(s)), the deterministic action
+                    anchor = (th.tanh(mean) - old_mean).pow(2).sum(1).mean()
+                    (loss / scale + settings.actor_proximal * anchor).backward()
                 if settings.max_grad_norm is not None:
                     clip_grad_norm_(actor.parameters(), settings.max_grad_norm)
                 actor.optimizer.step()
