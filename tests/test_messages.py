@@ -110,7 +110,7 @@ def test_preset_of_another_algorithm_is_refused_by_name() -> None:
     env = gym.make("Pendulum-v1")
     with pytest.raises(TypeError, match=r"presets\.PAPER is DENFAC's preset, and SoftDENFAC does not take") as error:
         SoftDENFAC("MlpPolicy", env, **presets.PAPER)
-    for key in ("weighting", "sigma", "actor_proximal", "target_policy_noise"):
+    for key in ("weighting", "sigma", "target_policy_noise"):
         assert repr(key) in str(error.value)
     assert "'learning_rate'" not in str(error.value)  # SoftDENFAC takes it
     with pytest.raises(TypeError, match=r"presets\.PAPER is DENFAC's preset, and NFAC does not take .*'buffer_size'"):
