@@ -118,6 +118,16 @@ ALGOS: dict[str, Algo] = {
             base="denfac_rho2",
             overrides=CROSSQ_CRITIC,
         ),
+        # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
+        # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
+        Algo(
+            "soft_crossq_anchor",
+            "soft_denfac",
+            "SoftDENFAC (rho 2, CrossQ's critic, anchor 5)",
+            "paper",
+            base="denfac_rho2",
+            overrides=(*CROSSQ_CRITIC, ("actor_proximal", 5.0)),
+        ),
         # the package's zoo entry of a goal-conditioned env (hyperparams/denfac.yml: MultiInputPolicy, HerReplayBuffer,
         # gamma 0.95, the compute dial), for the robotics suite; the peers' rows read their files' entries of the env
         Algo("denfac_her", "denfac", "DENFAC + HER (zoo entry)", "paper", base="denfac"),

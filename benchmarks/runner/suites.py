@@ -173,7 +173,17 @@ SUITES: dict[str, Suite] = {
             "mujoco100k",
             MUJOCO100K_ENVS,
             (
-                (("denfac_default", "denfac_rho2", "denfac_data_efficient", "denfac_crossq", "soft_crossq"), _FIVE),
+                (
+                    (
+                        "denfac_default",
+                        "denfac_rho2",
+                        "denfac_data_efficient",
+                        "denfac_crossq",
+                        "soft_crossq",
+                        "soft_crossq_anchor",
+                    ),
+                    _FIVE,
+                ),
                 (("sac_zoo",), (0, 1)),
                 (("crossq_zoo",), (0,)),
             ),
