@@ -3,7 +3,7 @@ each fitted iteration), through the public seam ``updater_classes``. A study, no
 anchor's unit explains why the per-update anchor (``actor_proximal``) holds Ant-v5's start but freezes HalfCheetah-v5
 (100 updates in 100k steps).
 
-    python -m research.frontier_critics.iteration_anchor --envs Ant-v5 HalfCheetah-v5 --steps 30000
+    python -m research.frontier_critics.iteration_anchor --row soft_crossq_prox5 --envs Ant-v5 HalfCheetah-v5 --steps 30000
 """
 
 from __future__ import annotations
@@ -12,12 +12,14 @@ import argparse
 import json
 from pathlib import Path
 
+from benchmarks.rows import load_rows
 from research.mujoco100k import probe
 from sb3_denfac import SoftDENFAC
 from sb3_denfac.denfac.update_paths import UpdaterClasses
 from sb3_denfac.soft_denfac.updaters import SoftAutogradUpdater, SoftFastUpdater
 
 HERE = Path(__file__).parent
+ROWS = HERE / "rows.yml"
 
 
 class IterationAnchor:
@@ -44,26 +46,14 @@ class IterationAnchoredSoftDENFAC(SoftDENFAC):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=["Ant-v5", "HalfCheetah-v5"])
-    parser.add_argument("--lam", type=float, default=5.0)
+    parser.add_argument("--row", default="soft_crossq_prox5", help="a SoftDENFAC row of rows.yml, anchored per iteration")
     parser.add_argument("--steps", type=int, default=30000)
     parser.add_argument("--out", type=Path, default=HERE / "iteration_anchor.jsonl")
     args = parser.parse_args()
-    row = dict(
-        update_to_data_ratio=2.0,
-        n_fitted_iterations=(10, None),
-        bootstrap_bounds=True,
-        frozen_targets=False,
-        policy_kwargs={"batch_renorm": True},
-        actor_proximal=args.lam,
-    )
-    import sb3_denfac.soft_denfac as soft
-
-    soft.SoftDENFAC = IterationAnchoredSoftDENFAC  # the probe builds ``SoftDENFAC`` from this module's name
-    import sb3_denfac
-
-    sb3_denfac.SoftDENFAC = IterationAnchoredSoftDENFAC
+    row = {**load_rows(ROWS)[args.row], "algo": "soft_denfac"}
+    name = f"{args.row}_per_iteration"
     for env_id in args.envs:
-        record = probe.run_one(f"soft_crossq_iter{args.lam:g}", dict(row, algo="soft_denfac"), env_id, 0, args.steps, 5000, 10)
+        record = probe.run_one(name, row, env_id, 0, args.steps, 5000, 10, algorithm=IterationAnchoredSoftDENFAC)
         with args.out.open("a") as f:
             f.write(json.dumps(record) + "\n")
         print(env_id, round(record["cpu_time"]), [round(e["mean"]) for e in record["evaluations"]], flush=True)

@@ -75,8 +75,18 @@ def git_commit() -> str:
 
 
 def run_one(
-    name: str, row: dict[str, Any], env_id: str, seed: int, steps: int, every: int, episodes: int, log: Path | None = None
+    name: str,
+    row: dict[str, Any],
+    env_id: str,
+    seed: int,
+    steps: int,
+    every: int,
+    episodes: int,
+    log: Path | None = None,
+    algorithm: type | None = None,
 ) -> dict:
+    """One run of ``row`` (module docstring); ``algorithm``: a class to build instead of the one its ``algo`` names
+    (a study's subclass, e.g. with its own ``updater_classes``), the record keeping the row's ``algo``."""
     import torch as th
 
     import sb3_denfac  # noqa: F401 (registers the envs)
@@ -87,7 +97,9 @@ def run_one(
     env = Monitor(gym.make(env_id))  # the training episodes' returns, for episodes to a level
     eval_env = Monitor(gym.make(env_id))
     eval_env.reset(seed=10_000 + seed)
-    if algo == "denfac":
+    if algorithm is not None:
+        model = algorithm("MlpPolicy", env, seed=seed, **row)
+    elif algo == "denfac":
         from sb3_denfac import DENFAC
 
         model = DENFAC("MlpPolicy", env, seed=seed, **row)
