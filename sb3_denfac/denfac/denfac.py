@@ -20,10 +20,17 @@ from sb3_denfac.common.device import warn_about_device
 from sb3_denfac.common.episodic import EpisodicOffPolicyAlgorithm
 from sb3_denfac.common.exploration import behaviour_log_prob, truncated_gaussian_actions
 from sb3_denfac.common.learning_rates import ActorCriticRatesMixin
-from sb3_denfac.common.truncated_normal import clamp_mean, truncated_importance_weights, truncated_normal_log_prob
+from sb3_denfac.common.truncated_normal import clamp_mean
 from sb3_denfac.denfac.buffers import BehaviourMeansBuffer, DENFACReplayBufferSamples, check_holds_one_episode, n_rows, take
 from sb3_denfac.denfac.her import replay_buffer_class_for, take_goal_settings
-from sb3_denfac.denfac.options import FittedIterations, bootstrap_range, clip_bootstrap, fitted_iterations
+from sb3_denfac.denfac.options import (
+    FittedIterations,
+    bootstrap_range,
+    clip_bootstrap,
+    fitted_iterations,
+    importance_weights,
+    target_actions,
+)
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
 from sb3_denfac.denfac.settings import store_settings, warn_ignored_settings
 from sb3_denfac.denfac.update_paths import DENFAC_UPDATERS, UpdaterClasses, check_update_path, make_updater
@@ -324,7 +331,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
                 if penalty is not None:
                     next_q = next_q - penalty
                 q_targets = r + discounts * next_q
-                weights = self._importance_weights(updater, o, o2, a, lp_b)
+                weights = importance_weights(self.weighting, updater.actor, o, o2, a, lp_b, self.sigma)
                 updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
                 updater.reset_critic()
@@ -377,30 +384,9 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         self.logger.record("train/fitted_iterations", stats.fitted_iterations)
 
     def _next_actions(self, updater: Updater, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor | None]:
-        """The next actions a' of eq. (4)'s targets (:meth:`_target_actions`), and what the bootstrap value subtracts at
-        them: nothing here (SoftDENFAC: alpha log pi(a'|s'))."""
-        return self._target_actions(updater, next_obs), None
-
-    def _target_actions(self, updater: Updater, next_obs: th.Tensor) -> th.Tensor:
-        """The next actions of eq. (4)'s targets: pi_{k-1}(s'), plus, with ``target_policy_noise`` > 0, Gaussian noise
-        clipped to +-``target_noise_clip`` (TD3's target policy smoothing, Fujimoto et al. 2018, eq. 14), drawn anew at
-        every fitted iteration; clamped to the action bounds [-1, 1]."""
-        actions = updater.actor(next_obs)
-        if self.target_policy_noise > 0:
-            noise = th.randn_like(actions) * self.target_policy_noise
-            actions = actions + noise.clamp(-self.target_noise_clip, self.target_noise_clip)
-        return actions.clamp(-1.0, 1.0)
-
-    def _importance_weights(
-        self, updater: Updater, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor
-    ) -> th.Tensor:
-        """c_t = min(1, pi_{k-1}(a_t|s_t) / pi_b(a_t|s_t)) (``weighting``), shape (N, 1)."""
-        if self.weighting == "none":
-            return th.ones_like(log_prob_b).unsqueeze(1)
-        weight_obs = next_obs if self.weighting == "retrace_next_state_quirk" else obs
-        low, high = th.full_like(actions, -1.0), th.full_like(actions, 1.0)
-        log_prob_target = truncated_normal_log_prob(actions, updater.actor(weight_obs), self.sigma, low, high)
-        return truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
+        """The next actions a' of eq. (4)'s targets (:func:`~.options.target_actions`: pi_{k-1}(s') with TD3's target
+        policy smoothing), and what the bootstrap value subtracts at them: nothing here (SoftDENFAC: alpha log pi(a'|s'))."""
+        return target_actions(updater.actor(next_obs), self.target_policy_noise, self.target_noise_clip), None
 
     # ----- SB3 plumbing --------------------------------------------------------------------------------------------
     def _excluded_save_params(self) -> list[str]:

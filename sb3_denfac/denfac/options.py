@@ -1,4 +1,5 @@
-"""The two fixes the paper names as future work as DENFAC options, and a bound on updates per collected step.
+"""The two fixes the paper names as future work as DENFAC options, a bound on updates per collected step, and the
+options of eq. (4)'s targets (next actions, importance weights, bootstrap bounds).
 
 The paper says DENFAC "lacks stability" and names two remedies it did not try: a replay memory D that is not sampled
 as a plain FIFO queue (transitions weighted by their delta error, with the open question of whether the actor and the
@@ -69,6 +70,7 @@ import torch as th
 
 from sb3_denfac.common.checks import check_choice, check_number
 from sb3_denfac.common.inverting_gradients import invert_gradients
+from sb3_denfac.common.truncated_normal import truncated_importance_weights, truncated_normal_log_prob
 
 PRIORITIZED = ("none", "critic", "both")
 
@@ -193,3 +195,26 @@ def clip_bootstrap(next_q: th.Tensor, bounds: tuple[float, float] | None) -> tup
         return next_q, th.zeros(())
     clipped = ((next_q < bounds[0]) | (next_q > bounds[1])).float().mean()
     return next_q.clamp(*bounds), clipped
+
+
+def target_actions(actions: th.Tensor, noise_std: float, noise_clip: float) -> th.Tensor:
+    """The next actions of eq. (4)'s targets from ``actions`` = pi_{k-1}(s'): plus, with ``noise_std`` > 0 (DENFAC's
+    ``target_policy_noise``), Gaussian noise clipped to +-``noise_clip`` (TD3's target policy smoothing, Fujimoto et al.
+    2018, eq. 14), drawn anew at every call (every fitted iteration); clamped to the action bounds [-1, 1]."""
+    if noise_std > 0:
+        actions = actions + (th.randn_like(actions) * noise_std).clamp(-noise_clip, noise_clip)
+    return actions.clamp(-1.0, 1.0)
+
+
+def importance_weights(
+    weighting: str, actor: Any, obs: th.Tensor, next_obs: th.Tensor, actions: th.Tensor, log_prob_b: th.Tensor, sigma: float
+) -> th.Tensor:
+    """c_t = min(1, pi_{k-1}(a_t|s_t) / pi_b(a_t|s_t)) of eq. (4), shape (N, 1), with pi_{k-1} = ``actor``'s truncated
+    Gaussian of std ``sigma``: ``weighting`` "retrace"; "retrace_next_state_quirk" evaluates pi_{k-1} at s' (the authors'
+    code); "none": c = 1."""
+    if weighting == "none":
+        return th.ones_like(log_prob_b).unsqueeze(1)
+    weight_obs = next_obs if weighting == "retrace_next_state_quirk" else obs
+    low, high = th.full_like(actions, -1.0), th.full_like(actions, 1.0)
+    log_prob_target = truncated_normal_log_prob(actions, actor(weight_obs), sigma, low, high)
+    return truncated_importance_weights(log_prob_target, log_prob_b).unsqueeze(1)
