@@ -164,6 +164,12 @@ class PrioritisedSampler:
         return idx, self.weights[idx]
 
 
+def anchor_scale(action_grads: th.Tensor) -> th.Tensor:
+    """The proximal actor's normaliser S = 1/B sum_B ||g_i||_2 (module docstring) of the per-sample action gradients
+    ``action_grads`` = g, shape (B, A); floored at 1e-12 so that a flat critic divides by no zero."""
+    return action_grads.detach().norm(dim=1).mean().clamp(min=1e-12)
+
+
 def proximal_actor_backward(
     q_values: th.Tensor, actions: th.Tensor, old_actions: th.Tensor, coef: float, inverting_gradients: bool
 ) -> th.Tensor:
@@ -176,7 +182,7 @@ def proximal_actor_backward(
     grad = grad * actions.shape[0]  # g_i = dQ/da per sample (the mean's 1/B undone)
     if inverting_gradients:
         grad = invert_gradients(grad, actions.detach(), th.full_like(grad, -1.0), th.full_like(grad, 1.0))
-    scale = grad.norm(dim=1).mean().clamp(min=1e-12)
+    scale = anchor_scale(grad)
     loss = -(actions * (grad / scale)).sum(1).mean() + coef * (actions - old_actions).pow(2).sum(1).mean()
     loss.backward()
     return q_values.detach().mean()

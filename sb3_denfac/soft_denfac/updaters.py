@@ -13,6 +13,7 @@ from torch.nn.utils import clip_grad_norm_
 
 from sb3_denfac.denfac.buffers import n_rows, take
 from sb3_denfac.denfac.fast import FastUpdater
+from sb3_denfac.denfac.options import anchor_scale
 from sb3_denfac.denfac.update_paths import UpdaterClasses
 from sb3_denfac.denfac.updaters import AutogradUpdater, FitSettings, Updater, frozen_copy
 
@@ -68,7 +69,7 @@ class SoftActorFit(Updater):
                     loss.backward()
                 else:
                     (grad,) = th.autograd.grad(q.sum(), actions, retain_graph=True)  # dQ/da_i per sample
-                    scale = grad.norm(dim=1).mean().clamp(min=1e-12)
+                    scale = anchor_scale(grad)
                     with th.no_grad():
                         old_mean = self.old_actor(o)  # tanh(m_old(s)), the deterministic action
                     anchor = (th.tanh(mean) - old_mean).pow(2).sum(1).mean()
