@@ -176,3 +176,36 @@ def test_bad_network_arguments_are_rejected():
         create_bn_mlp(4, 1, [5], init="xavier")
     with pytest.raises(ValueError, match="hidden layer sizes"):
         create_bn_mlp(4, 1, [0])
+
+
+@pytest.mark.parametrize("renorm_phase", [False, True], ids=["warm-up", "renorm"])
+def test_batch_renorm_equals_sb3_contribs(renorm_phase):
+    """The project's BatchRenorm1d (two-pass variance) computes sb3-contrib's function: outputs, gradients and running
+    statistics to float32 rounding (relative 1e-4), in the warm-up (batch statistics) and the renormalised phase."""
+    from sb3_contrib.common.torch_layers import BatchRenorm1d as Reference
+
+    from sb3_denfac.common.networks import BatchRenorm1d
+
+    th.manual_seed(0)
+    ours, reference = BatchRenorm1d(16), Reference(16)
+    x = th.randn(64, 16) * th.linspace(0.1, 10.0, 16) + th.linspace(-5.0, 5.0, 16)  # features of unequal scales
+    for layer in (ours, reference):
+        with th.no_grad():
+            layer.scale.copy_(th.linspace(0.5, 2.0, 16))
+            layer.bias.copy_(th.linspace(-1.0, 1.0, 16))
+        if renorm_phase:  # past the warm-up, running statistics away from the batch's: r and d are clipped
+            layer.steps.fill_(layer.warmup_steps + 1)
+            layer.ra_mean.copy_(th.linspace(-8.0, 8.0, 16))
+            layer.ra_var.copy_(th.linspace(0.01, 50.0, 16))
+    results = []
+    for layer in (ours, reference):
+        inputs = x.clone().requires_grad_(True)
+        out = layer(inputs)
+        (out * th.linspace(-1.0, 1.0, 64)[:, None]).pow(2).sum().backward()
+        results.append((out.detach(), inputs.grad, layer.scale.grad, layer.ra_mean.clone(), layer.ra_var.clone()))
+    for ours_t, ref_t in zip(*results, strict=True):
+        th.testing.assert_close(ours_t, ref_t, rtol=1e-4, atol=1e-4 * float(ref_t.abs().max()))
+    assert int(ours.steps) == int(reference.steps)
+    ours.eval()
+    reference.eval()
+    th.testing.assert_close(ours(x), reference(x), rtol=1e-5, atol=1e-5)

@@ -7,11 +7,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from sb3_contrib.common.torch_layers import BatchRenorm1d
 from torch import nn
 
 from sb3_denfac import DENFAC, SoftDENFAC
-from sb3_denfac.common.networks import ResidualBlock
+from sb3_denfac.common.networks import BatchRenorm1d, ResidualBlock
 from sb3_denfac.denfac.buffers import n_rows
 from sb3_denfac.denfac.updaters import AutogradUpdater
 
