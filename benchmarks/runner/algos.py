@@ -118,6 +118,20 @@ ALGOS: dict[str, Algo] = {
             base="denfac_rho2",
             overrides=CROSSQ_CRITIC,
         ),
+        # the same with SAC's width of critic (256-256) on mini-batches of 128 (a joint pass of 256 rows): the screen's
+        # `soft_crossq_w256_b128` (research/frontier_critics: the 64-wide critic loses Ant-v5's stand, 256 holds it)
+        Algo(
+            "soft_crossq_wide",
+            "soft_denfac",
+            "SoftDENFAC (rho 2, CrossQ's critic 256-256, batch 128)",
+            "paper",
+            base="denfac_rho2",
+            overrides=(
+                ("frozen_targets", False),
+                ("policy_kwargs", {"batch_renorm": True, "net_arch": {"pi": [64, 64], "qf": [256, 256]}}),
+                ("batch_size", 128),
+            ),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(

@@ -180,6 +180,7 @@ SUITES: dict[str, Suite] = {
                         "denfac_data_efficient",
                         "denfac_crossq",
                         "soft_crossq",
+                        "soft_crossq_wide",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,
