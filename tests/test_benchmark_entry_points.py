@@ -236,6 +236,16 @@ def test_frontier_critics_study_scripts(tmp_path, capsys):
     assert "rho2 (suite)" in set(table["row"]) and set(table["env"]) <= {"Hopper-v5", "Walker2d-v5"}
 
 
+def test_zero_action_reference_stands_on_ant():
+    """``research/frontier_critics/zero_action.py``: the reference docs/results.md quotes, that on Ant-v5 the zero
+    action stands a whole episode (1000 steps) and scores above the published SAC's 747 at 100k steps."""
+    pytest.importorskip("mujoco")
+    from research.frontier_critics.zero_action import zero_action_returns
+
+    returns, lengths = zero_action_returns("Ant-v5", episodes=1)
+    assert lengths == [1000] and returns[0] > 900
+
+
 @pytest.mark.parametrize(
     "module",
     [
