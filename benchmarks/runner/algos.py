@@ -125,9 +125,8 @@ ALGOS: dict[str, Algo] = {
             "soft_denfac",
             "SoftDENFAC (rho 2, CrossQ's critic 256-256, batch 128)",
             "paper",
-            base="denfac_rho2",
+            base="soft_crossq",
             overrides=(
-                ("frozen_targets", False),
                 ("policy_kwargs", {"batch_renorm": True, "net_arch": {"pi": [64, 64], "qf": [256, 256]}}),
                 ("batch_size", 128),
             ),
