@@ -197,15 +197,53 @@ def test_batch_renorm_equals_sb3_contribs(renorm_phase):
             layer.steps.fill_(layer.warmup_steps + 1)
             layer.ra_mean.copy_(th.linspace(-8.0, 8.0, 16))
             layer.ra_var.copy_(th.linspace(0.01, 50.0, 16))
-    results = []
-    for layer in (ours, reference):
+
+    def outcome(layer: th.nn.Module) -> tuple[th.Tensor, ...]:
         inputs = x.clone().requires_grad_(True)
         out = layer(inputs)
         (out * th.linspace(-1.0, 1.0, 64)[:, None]).pow(2).sum().backward()
-        results.append((out.detach(), inputs.grad, layer.scale.grad, layer.ra_mean.clone(), layer.ra_var.clone()))
-    for ours_t, ref_t in zip(*results, strict=True):
-        th.testing.assert_close(ours_t, ref_t, rtol=1e-4, atol=1e-4 * float(ref_t.abs().max()))
-    assert int(ours.steps) == int(reference.steps)
-    ours.eval()
-    reference.eval()
-    th.testing.assert_close(ours(x), reference(x), rtol=1e-5, atol=1e-5)
+        grads = (inputs.grad, layer.scale.grad, layer.bias.grad)
+        layer.zero_grad()
+        return out.detach(), *grads, layer.ra_mean.clone(), layer.ra_var.clone()
+
+    for mode in ("train", "eval"):  # the batch's statistics (and the running ones' update), then the running ones
+        for layer in (ours, reference):
+            layer.train(mode == "train")
+        for ours_t, ref_t in zip(outcome(ours), outcome(reference), strict=True):
+            th.testing.assert_close(ours_t, ref_t, rtol=1e-4, atol=1e-4 * float(ref_t.abs().max()))
+        assert int(ours.steps) == int(reference.steps)
+
+
+@pytest.mark.parametrize("renorm_phase", [False, True], ids=["warm-up", "renorm"])
+def test_batch_renorm_backward_is_the_gradient(renorm_phase):
+    """BatchRenorm1d's hand-written backward is the derivative of its training-mode function: torch's numerical
+    gradient check in float64 (gradcheck's tolerances), for the input, the scale and the bias. Past the warm-up the
+    running statistics are far from the batch's, so that r and d sit at their clips and are constant, as the layer
+    treats them (detached)."""
+    from sb3_denfac.common.networks import _BatchRenormTraining
+
+    th.manual_seed(0)
+    x = (th.randn(12, 5, dtype=th.float64) * th.linspace(0.5, 1.5, 5)).requires_grad_(True)
+    scale = th.linspace(0.5, 2.0, 5, dtype=th.float64).requires_grad_(True)
+    bias = th.linspace(-1.0, 1.0, 5, dtype=th.float64).requires_grad_(True)
+    ra_mean = th.tensor([-200.0, 200.0, -200.0, 200.0, -200.0], dtype=th.float64)  # |d| = 10 > 5: clipped at d_max
+    ra_var = th.full((5,), 400.0, dtype=th.float64)  # r < 0.1: clipped at 1/r_max
+
+    def layer(inputs: th.Tensor, w: th.Tensor, b: th.Tensor) -> th.Tensor:
+        return _BatchRenormTraining.apply(inputs, w, b, ra_mean, ra_var, 1e-3, renorm_phase, 3.0, 5.0)[0]
+
+    assert th.autograd.gradcheck(layer, (x, scale, bias))
+
+
+def test_batch_renorm_constant_feature_has_a_finite_gradient():
+    """Past the warm-up a feature constant over the batch (v = 0) gets a finite gradient: the renormalisation's shift
+    d sqrt(v) / r has no derivative at v = 0, where autograd (sb3-contrib's layer) returns nan; the layer takes 0."""
+    from sb3_denfac.common.networks import BatchRenorm1d
+
+    layer = BatchRenorm1d(3)
+    layer.steps.fill_(layer.warmup_steps + 1)
+    x = th.randn(32, 3)
+    x[:, 1] = 0.5
+    x.requires_grad_(True)
+    layer(x).pow(2).sum().backward()
+    assert th.isfinite(x.grad).all() and th.isfinite(layer.scale.grad).all()
