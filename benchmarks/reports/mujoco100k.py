@@ -211,6 +211,7 @@ ROW_COLOURS = {
     "denfac_crossq": "darkviolet",
     "soft_crossq": "darkgreen",
     "soft_crossq_wide": "limegreen",
+    "soft_crossq_wide_rho1": "mediumseagreen",
     "soft_crossq_anchor": "olive",
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",

@@ -131,6 +131,16 @@ ALGOS: dict[str, Algo] = {
                 ("batch_size", 128),
             ),
         ),
+        # the same at rho 1, CrossQ's and SAC's update-to-data ratio: SAC's critic rows per env step (one joint pass of
+        # 256 rows per env step), for SB3 SAC's CPU (research/frontier_critics: rho 2 costs about twice SAC's)
+        Algo(
+            "soft_crossq_wide_rho1",
+            "soft_denfac",
+            "SoftDENFAC (rho 1, CrossQ's critic 256-256, batch 128)",
+            "paper",
+            base="soft_crossq_wide",
+            overrides=(("update_to_data_ratio", 1.0),),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(

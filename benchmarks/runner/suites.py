@@ -181,6 +181,7 @@ SUITES: dict[str, Suite] = {
                         "denfac_crossq",
                         "soft_crossq",
                         "soft_crossq_wide",
+                        "soft_crossq_wide_rho1",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,
