@@ -322,17 +322,20 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
             rows = None if sample is None else sample.critic_rows
             o, a, o2, r, done, lp_b = (take(x, rows) for x in (obs, actions, next_obs, rewards, terminal, log_prob_b))
             # Targets q_k and weights c from (Q_{k-1}, pi_{k-1}), before any reset (eval mode: running statistics).
+            # With frozen_targets=False the joint critic steps make their own targets: q_k is then computed only where
+            # it is read, the iteration that may be the update's last (logging, last_update) and prioritised sampling.
             with th.no_grad():
                 discounts = self.gamma * (1.0 - done)
                 # a' of eq. (4) (one draw per iteration, read by q_k and, with frozen_targets=False, by every joint
                 # critic step, CrossQ's) and what the bootstrap value subtracts at it (SoftDENFAC: alpha log pi)
                 next_actions, penalty = self._next_actions(updater, o2)
-                next_q, clipped = clip_bootstrap(updater.critic(o2, next_actions), bounds)
-                if penalty is not None:
-                    next_q = next_q - penalty
-                q_targets = r + discounts * next_q
+                if self.frozen_targets or may_end_early or k == n_iterations - 1 or self.prioritized != "none":
+                    next_q, clipped = clip_bootstrap(updater.critic(o2, next_actions), bounds)
+                    if penalty is not None:
+                        next_q = next_q - penalty
+                    q_targets = r + discounts * next_q
+                    updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
                 weights = importance_weights(self.weighting, updater.actor, o, o2, a, lp_b, self.sigma)
-                updater.set_priorities(o, a, q_targets)  # delta = q_k - Q_{k-1}(s, a) (``prioritized``)
             if self.reset_critic:
                 updater.reset_critic()
             batches = None if sample is None else sample.critic_batches
