@@ -141,6 +141,16 @@ ALGOS: dict[str, Algo] = {
             base="soft_crossq_wide",
             overrides=(("update_to_data_ratio", 1.0),),
         ),
+        # the same at rho 1.5: about SB3 SAC's CPU since the batch renorm's hand-written backward and fused Adam (a
+        # critic step of the wide pair costs 7.5-9 ms here, SAC's env step 12-16 ms)
+        Algo(
+            "soft_crossq_wide_rho15",
+            "soft_denfac",
+            "SoftDENFAC (rho 1.5, CrossQ's critic 256-256, batch 128)",
+            "paper",
+            base="soft_crossq_wide",
+            overrides=(("update_to_data_ratio", 1.5),),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(

@@ -182,6 +182,7 @@ SUITES: dict[str, Suite] = {
                         "soft_crossq",
                         "soft_crossq_wide",
                         "soft_crossq_wide_rho1",
+                        "soft_crossq_wide_rho15",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,
