@@ -307,19 +307,9 @@ def test_update_path_errors(make_denfac):
     model = make_denfac(update_path="fast", policy_kwargs=sgd)
     with pytest.raises(ValueError, match="update_path=.fast. needs"):
         model.learn(60)
-    # Adam with device-side step counts (capturable): the fast path keeps counts on the host, so refuse it
-    capturable = dict(net_arch=dict(pi=[8], qf=[16, 4]), optimizer_kwargs=dict(capturable=True))
+    # Adam with device-side step counts (fused / capturable): the fast path keeps counts on the host, so refuse it
+    fused = dict(net_arch=dict(pi=[8], qf=[16, 4]), optimizer_kwargs=dict(fused=True))
     with pytest.raises(ValueError, match="update_path=.fast. needs"):
-        make_denfac(update_path="fast", policy_kwargs=capturable).learn(60)
-    auto = make_denfac(update_path="auto", policy_kwargs=capturable).learn(60)
+        make_denfac(update_path="fast", policy_kwargs=fused).learn(60)
+    auto = make_denfac(update_path="auto", policy_kwargs=fused).learn(60)
     assert np.isfinite(auto.logger.name_to_value["train/q_target_mean"])
-
-
-def test_adam_is_fused_unless_the_caller_chooses(make_denfac):
-    """The policy's Adam runs torch's fused kernel (one kernel for all tensors) unless optimizer_kwargs name an
-    implementation; the fast path takes it (its step count is a host tensor on the CPU)."""
-    model = make_denfac()
-    assert all(net.optimizer.defaults["fused"] for net in (model.policy.actor, model.policy.critic))
-    chosen = make_denfac(policy_kwargs=dict(net_arch=dict(pi=[8], qf=[16, 4]), optimizer_kwargs=dict(foreach=False)))
-    assert not chosen.policy.critic.optimizer.defaults["fused"] and chosen.policy.critic.optimizer.defaults["foreach"] is False
-    assert "fused" not in chosen.policy.optimizer_kwargs and "fused" not in model.policy.optimizer_kwargs  # not saved

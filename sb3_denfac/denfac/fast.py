@@ -246,7 +246,7 @@ def supported_networks(policy, flat_actor: bool = True) -> tuple[list[_Layer] | 
             return None
         if group.get("weight_decay", 0) != 0 or group.get("amsgrad") or group.get("maximize"):
             return None
-        if group.get("capturable"):  # its step count lives on the device; ours on the host
+        if group.get("capturable") or group.get("fused"):  # their step counts live on the device; ours on the host
             return None
     critic_layers = [parse_bn_mlp(q) for q in policy.critic.q_networks]
     if any(layers is None for layers in critic_layers):

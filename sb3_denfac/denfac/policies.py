@@ -22,7 +22,6 @@ from torch import nn
 from sb3_denfac.common.actor import DeterministicActor, parse_net_arch
 from sb3_denfac.common.checks import check_bool, check_number
 from sb3_denfac.common.networks import create_bn_mlp, create_residual_mlp, reset_parameters_
-from sb3_denfac.denfac import eager_steps
 
 #: ``net_arch`` of :class:`DENFACPolicy` when it is None (paper: pi=[20], qf=[50, 7]).
 DEFAULT_NET_ARCH: dict[str, list[int]] = {"pi": [64, 64], "qf": [64, 64]}
@@ -288,13 +287,7 @@ class DENFACBasePolicy(BasePolicy):
     def make_optimizer(self, net: nn.Module, rate: float | Schedule | None, lr_schedule: Schedule) -> th.optim.Optimizer:
         rate = lr_schedule if rate is None else rate
         lr = rate(1) if callable(rate) else rate
-        kwargs = dict(self.optimizer_kwargs)
-        fused = eager_steps.FUSED_ADAM and self.optimizer_class in (th.optim.Adam, th.optim.AdamW)
-        if fused and not {"fused", "foreach"} & kwargs.keys():
-            # Adam's fused kernel where this torch has it, unless the caller chose an implementation: the same update up
-            # to float rounding; on CPU torch's default loops over the tensors one by one, a sixth of a small critic's step
-            kwargs["fused"] = True
-        return self.optimizer_class(net.parameters(), lr=lr, **kwargs)  # type: ignore[call-arg]
+        return self.optimizer_class(net.parameters(), lr=lr, **self.optimizer_kwargs)  # type: ignore[call-arg]
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
