@@ -132,7 +132,7 @@ ALGOS: dict[str, Algo] = {
             ),
         ),
         # the same at rho 1, CrossQ's and SAC's update-to-data ratio: SAC's critic rows per env step (one joint pass of
-        # 256 rows per env step), for SB3 SAC's CPU (research/frontier_critics: rho 2 costs about twice SAC's)
+        # 256 rows per env step), at or below SB3 SAC's CPU (research/frontier_critics)
         Algo(
             "soft_crossq_wide_rho1",
             "soft_denfac",
@@ -141,8 +141,8 @@ ALGOS: dict[str, Algo] = {
             base="soft_crossq_wide",
             overrides=(("update_to_data_ratio", 1.0),),
         ),
-        # the same at rho 1.5: about SB3 SAC's CPU since the batch renorm's hand-written backward and fused Adam (a
-        # critic step of the wide pair costs 7.5-9 ms here, SAC's env step 12-16 ms)
+        # the same at rho 1.5: about SB3 SAC's CPU with the batch renorm's hand-written backward (research/frontier_critics:
+        # the cost of the wide pair's critic step against SAC's env step)
         Algo(
             "soft_crossq_wide_rho15",
             "soft_denfac",

@@ -1,7 +1,4 @@
 #!/usr/bin/env bash
-# The mujoco100k suite's row soft_crossq_wide, 5 seeds, in the committed study (resumable: a rerun skips finished
-# cells and resumes a checkpointed one). $1: a PID to wait for (or 0); the rest: the envs of this worker.
-cd "$(dirname "$0")/../.."
-while [ "$1" != 0 ] && kill -0 "$1" 2>/dev/null; do sleep 20; done
-OMP_NUM_THREADS=1 .venv/bin/python -m benchmarks.run --suite mujoco100k --algos soft_crossq_wide --envs "${@:2}" \
-  --seeds 0 1 2 3 4 --results benchmarks/results/mujoco100k --workers 0 --no-analysis
+# The mujoco100k suite's row soft_crossq_wide, 5 seeds (queue_row.sh with that row). $1: a PID to wait for (or 0); the
+# rest: the envs of this worker.
+exec "$(dirname "$0")/queue_row.sh" "$1" soft_crossq_wide "${@:2}"
