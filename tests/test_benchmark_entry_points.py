@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import re
 import subprocess
 import sys
@@ -336,6 +337,28 @@ def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_
     capsys.readouterr()
     assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
     assert "0 runs to do, 3 already finished" in capsys.readouterr().out
+
+
+def test_the_jax_peer_runs_where_sbx_is_installed(tmp_path):
+    """mujoco100k's ``crossq_sbx`` row (sbx's CrossQ, the frontier extra) goes through the runner as any row: registered
+    with the zoo on first use, its YAML entry, one JAX thread, its evaluations at the step budget."""
+    pytest.importorskip("sbx", reason="the frontier extra (sbx-rl) is not installed")
+    args = ["--algos", "crossq_sbx", "--envs", "Pendulum-v1", "--seeds", "0", "--timesteps", "400"]
+    assert runner.main([*args, "--results", str(tmp_path), "--workers", "0", "--no-analysis"]) == 0
+    (record,) = store.read_runs(tmp_path)
+    assert record["status"] == "done" and record["timesteps"] == 400, record.get("log")
+    assert record["hyperparams"]["learning_starts"] == "5000" and record["zoo_algo"] == "sbx_crossq"
+    assert [e["timesteps"] for e in record["evaluations"]] == [200, 400]
+    assert os.environ["XLA_FLAGS"]  # set before JAX's first import (or the caller's own, kept)
+
+
+def test_the_jax_peer_without_sbx_names_the_package_to_install(monkeypatch):
+    from benchmarks.runner.algos import register_external
+
+    monkeypatch.setitem(sys.modules, "sbx", None)  # import sbx now raises ImportError
+    with pytest.raises(ImportError, match=r"sbx-rl's CrossQ: pip install sbx-rl"):
+        register_external("sbx_crossq")
+    register_external("sac")  # the zoo's own algorithms: nothing to register
 
 
 def test_step_budget_suite_refuses_an_episode_budget(tmp_path):

@@ -217,6 +217,7 @@ ROW_COLOURS = {
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",
     "crossq_zoo": "tab:purple",
+    "crossq_sbx": "magenta",
 }
 OTHER_COLOURS = ("tab:green", "gold", "teal", "tab:brown")
 FRONTIER_COLOURS = ("tab:cyan", "tab:olive", "tab:purple", "tab:brown", "tab:pink", "tab:gray")

@@ -40,6 +40,37 @@ class Algo:
     row: str | None = None
 
 
+#: Peers from packages outside the RL Zoo's registry: zoo name -> (module, class, the pip package that provides it).
+#: They are optional (``pip install -e ".[frontier]"``): :func:`register_external` adds one to the zoo on first use.
+EXTERNAL_ZOO_ALGOS: dict[str, tuple[str, str, str]] = {"sbx_crossq": ("sbx", "CrossQ", "sbx-rl")}
+
+#: One thread for JAX's CPU work, as the runner gives torch one (``torch.set_num_threads(1)``): the CPU seconds of a
+#: JAX peer are then comparable to the others'. Set before JAX is first imported; an ``XLA_FLAGS`` already set is kept.
+JAX_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+
+
+def register_external(zoo_algo: str) -> None:
+    """Register the peer ``zoo_algo`` of :data:`EXTERNAL_ZOO_ALGOS` with the RL Zoo (nothing for any other name); an
+    ImportError names the package to install if it is missing."""
+    if zoo_algo not in EXTERNAL_ZOO_ALGOS:
+        return
+    import importlib
+    import os
+
+    import rl_zoo3
+
+    module_name, class_name, package = EXTERNAL_ZOO_ALGOS[zoo_algo]
+    os.environ.setdefault("XLA_FLAGS", JAX_ONE_THREAD)
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise ImportError(
+            f"The row's algorithm {zoo_algo!r} is {package}'s {class_name}: pip install {package} "
+            '(or the frontier extra: pip install -e ".[frontier]")'
+        ) from error
+    rl_zoo3.ALGOS.setdefault(zoo_algo, getattr(module, class_name))
+
+
 #: DENFAC's schedule for an SB3 off-policy peer: train at every episode end, as many critic steps as the default DENFAC
 #: (``"denfac"``: ``benchmarks.runner.hyperparams.denfac_critic_steps_per_episode``).
 MATCHED_SCHEDULE = (("train_freq", (1, "episode")), ("gradient_steps", "denfac"))
@@ -196,6 +227,11 @@ ALGOS: dict[str, Algo] = {
                 ("policy_kwargs", {"net_arch": {"pi": [256, 256], "qf": [2048, 2048]}}),
             ),
         ),
+        # the frontier peer at a cost this machine can run: sbx's CrossQ (JAX) with its own defaults (a 1024-1024
+        # batch-renormalised critic, "slightly smaller [than the paper's 2048] for faster computation", Adam beta1 0.5,
+        # actor delay 3, step size 1e-3, batch renorm in the actor too) and the RL Zoo's 5k random warm-up steps
+        # (configs/crossq_sbx.yml); about 110 ms per env step on one core here, ~3 CPU hours per 100k-step run
+        Algo("crossq_sbx", "sbx_crossq", "sbx CrossQ (1024-wide critic)", "peer"),
         Algo("sac_matched", "sac", "SB3 SAC on DENFAC's schedule", "peer", base="sac", overrides=MATCHED_SCHEDULE),
         Algo("td3_matched", "td3", "SB3 TD3 on DENFAC's schedule", "peer", base="td3", overrides=MATCHED_SCHEDULE),
         Algo("sac_utd20", "sac", "SB3 SAC, 20 steps per env step", "peer", base="sac", overrides=HIGH_UTD),

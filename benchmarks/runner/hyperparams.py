@@ -15,7 +15,7 @@ from typing import Any
 import yaml
 
 from benchmarks.runner import rows as row_files
-from benchmarks.runner.algos import ALGOS, BENCHMARK_CONFIGS_DIR, PACKAGE_HYPERPARAMS_DIR, Algo
+from benchmarks.runner.algos import ALGOS, BENCHMARK_CONFIGS_DIR, PACKAGE_HYPERPARAMS_DIR, Algo, register_external
 from benchmarks.runner.suites import HYPERPARAMS_OF
 from sb3_denfac.envs.facts import env_facts
 
@@ -47,6 +47,7 @@ def _takes_gamma(algo: str) -> bool:
     from sb3_denfac.zoo import algorithm_class
 
     zoo_algo = ALGOS[algo].zoo_algo if algo in ALGOS else algo
+    register_external(zoo_algo)
     return "gamma" in inspect.signature(algorithm_class(zoo_algo).__init__).parameters
 
 

@@ -188,7 +188,7 @@ SUITES: dict[str, Suite] = {
                     _FIVE,
                 ),
                 (("sac_zoo",), (0, 1)),
-                (("crossq_zoo",), (0,)),
+                (("crossq_zoo", "crossq_sbx"), (0,)),
             ),
             "the field's data-efficiency benchmark: Gymnasium MuJoCo at 100k env steps, 10 deterministic evaluation "
             "episodes every 10k steps; DENFAC's compute dial at three points (the default, rho 2, the data-efficient "

@@ -27,6 +27,7 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+from benchmarks.runner.algos import register_external
 from benchmarks.runner.checkpoints import RunCheckpoint, checkpoint_folder, replace_file, restore_callbacks, resume_or_start
 from benchmarks.runner.diagnostics import Diagnostics
 
@@ -253,6 +254,7 @@ def run_one(task: dict[str, Any]) -> dict[str, Any]:
             from sb3_denfac.envs.facts import env_facts
             from sb3_denfac.zoo import make_model
 
+            register_external(task["zoo_algo"])  # a peer from outside the RL Zoo's registry (sbx)
             facts = env_facts(task["env"])
             hyperparams, source = task["hyperparams"], task["hyperparams_source"]
             start, cpu_start = time.perf_counter(), time.process_time()
