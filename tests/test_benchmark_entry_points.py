@@ -341,7 +341,7 @@ def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_
 
 def test_the_jax_peer_runs_where_sbx_is_installed(tmp_path):
     """mujoco100k's ``crossq_sbx`` row (sbx's CrossQ, the frontier extra) goes through the runner as any row: registered
-    with the zoo on first use, its YAML entry, one JAX thread, its evaluations at the step budget."""
+    with the zoo on first use, its YAML entry, its evaluations at the step budget."""
     if importlib.util.find_spec("sbx") is None:
         pytest.skip("the frontier extra (sbx-rl) is not installed")
     # in a process of its own: JAX's threads would make this test process's later fork()s unsafe

@@ -5,9 +5,9 @@
 # Resumable: a rerun skips the (row, env, seed) cells already in the runs file (a run cut off is rerun whole).
 cd "$(dirname "$0")/../.."
 worker=$1; shift
-rows=("${@:-soft_wide15 soft_wide15_nofloor soft_wide15_beta05 soft_wide15_delay3 soft_wide15_lr3e4}")
+rows=${*:-soft_wide15 soft_wide15_nofloor soft_wide15_beta05 soft_wide15_delay3 soft_wide15_lr3e4}
 for seed in 0 1; do
-  for row in ${rows[*]}; do
+  for row in $rows; do
     OMP_NUM_THREADS=1 .venv/bin/python -m research.mujoco100k.probe --rows-file research/frontier_critics/rows.yml \
       --out "research/frontier_critics/runs_$worker.jsonl" --rows "$row" --envs Hopper-v5 Walker2d-v5 --seeds "$seed"
   done
