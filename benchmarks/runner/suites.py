@@ -183,6 +183,7 @@ SUITES: dict[str, Suite] = {
                         "soft_crossq_wide",
                         "soft_crossq_wide_rho1",
                         "soft_crossq_wide_rho15",
+                        "soft_crossq_wide_rho15_nofloor",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,
