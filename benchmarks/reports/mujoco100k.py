@@ -192,7 +192,8 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
         cpu, peer_cpu = here["cpu_time"].median(), theirs["cpu_time"].median().get(env, float("nan"))
         cpu_words = "no SAC runs" if np.isnan(peer_cpu) else f"{cpu / peer_cpu:.2f}x SB3 SAC's"
         out.append(
-            f"- {env} ({n} seed{'s' if n != 1 else ''}): final {final:.0f}; " + "; ".join(verdicts)
+            f"- {env} ({n} seed{'s' if n != 1 else ''}): final {final:.0f}; "
+            + "; ".join(verdicts)
             + f"; final / best {ratio:.2f} ({'met' if ratio >= 0.8 else 'missed'}); CPU {cpu:,.0f} s, {cpu_words}"
             + (" (met)" if cpu <= peer_cpu else " (missed)" if not np.isnan(peer_cpu) else "")
         )

@@ -145,7 +145,8 @@ SUITES: dict[str, Suite] = {
                     _FIVE,
                 ),
             ),  # fmt: skip
-            "the default DENFAC (its soft-actor option, the data-efficient preset and DENFAC at rho 4) against SB3's SAC and TD3 given "
+            "the default DENFAC (its soft-actor option, the data-efficient preset and DENFAC at rho 4) against SB3's SAC "
+            "and TD3 given "
             "DENFAC's schedule (train at every episode end, as many critic steps as DENFAC's default) and SAC at one step "
             "per env step; equal episodes, gradient steps and CPU reported",
         ),
