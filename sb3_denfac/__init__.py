@@ -31,7 +31,7 @@ _LAZY: dict[str, str] = {
     "EpisodePerformanceCallback": "sb3_denfac.common.callbacks",
     "UpdateStatsCallback": "sb3_denfac.common.callbacks",
 }
-#: Public modules imported on first access: ``from sb3_denfac import presets`` (DENFAC's PAPER, DATA_EFFICIENT...).
+#: Public modules imported on first access: ``from sb3_denfac import presets`` (PAPER, DATA_EFFICIENT...).
 _LAZY_MODULES: dict[str, str] = {"presets": "sb3_denfac.denfac.presets"}
 
 __all__ = [

@@ -331,7 +331,7 @@ def test_step_budgets_evaluate_by_env_steps_and_report_against_the_frontier(tmp_
         assert record["timesteps"] == 500 and record["timesteps_requested"] == 500 and record["n_episodes"] == 2
         assert [e["timesteps"] for e in record["evaluations"]] == [200, 400, 500]
     text = (tmp_path / "mujoco100k.md").read_text()
-    assert "DENFAC (data-efficient preset)" in text and "6156 ± 738 (10 seeds, at 100k)" in text
+    assert "SoftDENFAC (data-efficient preset)" in text and "6156 ± 738 (10 seeds, at 100k)" in text
     assert "sb3-contrib CrossQ (RL Zoo MuJoCo settings)" in text
     assert (tmp_path / "mujoco100k.png").stat().st_size > 0
     capsys.readouterr()

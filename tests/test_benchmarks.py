@@ -142,7 +142,7 @@ def test_suites_and_cells():
     frozen = load_hyperparams("sac_matched_frozen", "hopper")[0]
     assert (frozen["tau"], frozen["target_update_interval"], frozen["gradient_steps"]) == (1.0, 50, 500)
     matched = sweeps.select_cells("matched")
-    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 9 * 7 * 5
+    assert {e for _, e, _ in matched} >= {"hopper", "reacher"} and len(matched) == 10 * 7 * 5
     ablation = suites.SUITES["ablation"]
     assert ablation.study == "ablation" and ablation.diagnostics_every > 0
     # a user's runs go to runs/<study>/ under the current directory, never into the committed benchmarks/results/

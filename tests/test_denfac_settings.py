@@ -76,9 +76,10 @@ def test_settings_the_others_make_meaningless_are_named_in_a_warning():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for kwargs in ({}, presets.PAPER, presets.DATA_EFFICIENT, dict(prioritized=dict(on="critic", alpha=0.7))):
+        for kwargs in ({}, presets.PAPER, presets.DENFAC_DATA_EFFICIENT, dict(prioritized=dict(on="critic", alpha=0.7))):
             DENFAC("MlpPolicy", env, **kwargs)
         SoftDENFAC("MlpPolicy", env, critic_target="min")
+        SoftDENFAC("MlpPolicy", env, **presets.DATA_EFFICIENT)
 
 
 def test_adam_settings_live_in_optimizer_kwargs():

@@ -87,7 +87,8 @@ def _check_api_reference(objects: dict[str, str]) -> None:
             if (defined_here and not name.startswith("_")) or name in ("MlpPolicy", "MultiInputPolicy"):
                 expected.append(f"{module_name}.{name}")
     presets = "sb3_denfac.denfac.presets"
-    expected += [f"{presets}.{name}" for name in ("PAPER", "DATA_EFFICIENT", "data_efficient", "paper", "with_overrides")]
+    names = ("PAPER", "DATA_EFFICIENT", "DENFAC_DATA_EFFICIENT", "OWNERS", "data_efficient", "paper", "with_overrides")
+    expected += [f"{presets}.{name}" for name in names]
     expected += [f"sb3_denfac.common.callbacks.{name}" for name in ("EpisodePerformanceCallback", "UpdateStatsCallback")]
     missing = [name for name in expected if name not in objects]
     assert not missing, f"not in the API reference: {missing}"

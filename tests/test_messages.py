@@ -117,7 +117,11 @@ def test_preset_of_another_algorithm_is_refused_by_name() -> None:
         NFAC("MlpPolicy", env, **presets.paper(sigma=0.1))
     with pytest.raises(TypeError, match="^SoftDENFAC does not take weighting: no importance weights"):  # no preset
         SoftDENFAC("MlpPolicy", env, weighting="retrace")
-    SoftDENFAC("MlpPolicy", env, **presets.DATA_EFFICIENT)  # the keys it takes
+    SoftDENFAC("MlpPolicy", env, **presets.DATA_EFFICIENT)  # its own preset
+    with pytest.raises(TypeError, match=r"presets\.DATA_EFFICIENT is SoftDENFAC's preset, and NFAC does not take"):
+        NFAC("MlpPolicy", env, **presets.DATA_EFFICIENT)
+    with pytest.raises(TypeError, match=r"presets\.DENFAC_DATA_EFFICIENT is DENFAC's preset, and NFAC does not take"):
+        NFAC("MlpPolicy", env, **presets.DENFAC_DATA_EFFICIENT)
 
 
 def test_quickstart_help_is_for_a_user(capsys) -> None:

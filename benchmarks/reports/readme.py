@@ -35,7 +35,7 @@ FIGURE = "answer.png"
 COLUMNS = (
     ("matched", "denfac_default", "DENFAC", "tab:blue", "o"),
     ("matched", "denfac_soft", "SoftDENFAC", "tab:cyan", "D"),
-    ("matched", "denfac_data_efficient", "DENFAC, data-efficient preset", "tab:green", "P"),
+    ("matched", "denfac_rho4", "DENFAC at rho 4", "tab:green", "P"),
     ("matched", "sac", "SAC, 1 step per env step", "tab:orange", "s"),
     ("matched", "sac_matched", "SAC on DENFAC's schedule", "tab:red", "^"),
     ("high_utd", "sac_utd20", "SAC, 20 steps per env step", "tab:purple", "v"),
@@ -125,7 +125,8 @@ def body(table_md: str, folder: str) -> str:
     """The figure, what a cell is, the table; links relative to the study's ``folder``."""
     return (
         f"![Episodes to the level against CPU per run, per env]({folder}{FIGURE})\n\n"
-        "DENFAC's default, its soft actor and its data-efficient preset (`presets.DATA_EFFICIENT`) against SB3's SAC at "
+        "DENFAC's default, its soft actor and DENFAC at 4 critic steps per env step (`presets.DENFAC_DATA_EFFICIENT`) "
+        "against SB3's SAC at "
         "three schedules, the same episodes: median episodes until the best-so-far first reached the "
         "level, 5 seeds per cell (a run that did not reach it counts as past the budget), one torch thread per run "
         f"([matched]({folder}matched.md), [high_utd]({folder}high_utd.md) reports):\n\n"

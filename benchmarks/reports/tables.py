@@ -16,14 +16,15 @@ from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.suites import SUITES, Suite, estimated_cost
 from sb3_denfac.envs.facts import env_facts
 
-#: The rows of the user's answer (suite ``matched``): DENFAC's default (its soft actor, its data-efficient preset) against
-#: SAC at each schedule.
+#: The rows of the user's answer (suite ``matched``): DENFAC's default (its soft actor, the data-efficient preset, DENFAC
+#: at rho 4) against SAC at each schedule.
 ANSWER_ALGOS = (
     "denfac_default",
     "denfac_default04",
     "denfac_soft",
     "denfac_soft_min",
     "denfac_data_efficient",
+    "denfac_rho4",
     "sac",
     "sac_matched",
     "td3_matched",

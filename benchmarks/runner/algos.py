@@ -120,15 +120,19 @@ ALGOS: dict[str, Algo] = {
                 ("actor_steps", 12),
             ),
         ),  # fmt: skip
-        # the compute dial's data-efficient end (sb3_denfac.denfac.presets.DATA_EFFICIENT; configs/)
-        Algo("denfac_data_efficient", "denfac", "DENFAC (data-efficient preset)", "paper"),
-        # the dial's middle point: the preset at half its compute (presets.data_efficient(update_to_data_ratio=2))
+        # the data-efficient preset: SoftDENFAC("MlpPolicy", env, **presets.DATA_EFFICIENT) (configs/)
+        Algo("denfac_data_efficient", "soft_denfac", "SoftDENFAC (data-efficient preset)", "paper"),
+        # the compute dial's data-efficient end on DENFAC's own networks: rho 4 within (10, None), bootstrap bounds
+        # (presets.DENFAC_DATA_EFFICIENT, the data-efficient preset up to 0.5, whose runs were recorded under
+        # denfac_data_efficient; configs/)
+        Algo("denfac_rho4", "denfac", "DENFAC (dial at rho 4)", "paper"),
+        # the dial's middle point: rho 4's at half its compute
         Algo(
             "denfac_rho2",
             "denfac",
             "DENFAC (dial at rho 2)",
             "paper",
-            base="denfac_data_efficient",
+            base="denfac_rho4",
             overrides=(("update_to_data_ratio", 2.0),),
         ),  # fmt: skip
         # the preset's candidate (research/frontier_critics): rho 2 with CrossQ's critic (batch renorm, no frozen copy)
@@ -172,25 +176,16 @@ ALGOS: dict[str, Algo] = {
             base="soft_crossq_wide",
             overrides=(("update_to_data_ratio", 1.0),),
         ),
-        # the same at rho 1.5: about SB3 SAC's CPU with the batch renorm's hand-written backward (research/frontier_critics:
-        # the cost of the wide pair's critic step against SAC's env step)
-        Algo(
-            "soft_crossq_wide_rho15",
-            "soft_denfac",
-            "SoftDENFAC (rho 1.5, CrossQ's critic 256-256, batch 128)",
-            "paper",
-            base="soft_crossq_wide",
-            overrides=(("update_to_data_ratio", 1.5),),
-        ),
-        # the same without Algorithm 1's floor of 10 fitted iterations after each episode (range (1, None)): rho critic
-        # steps per env step and no more, so short episodes (early falls) no longer buy extra updates; the floor adds
-        # 16-27% of the critic steps on Hopper-v5 and Walker2d-v5 at rho 1.5 (research/frontier_critics)
+        # the same at rho 1.5 (the data-efficient preset: its runs were recorded under this row's name,
+        # soft_crossq_wide_rho15, before the preset took its settings) without Algorithm 1's floor of 10 fitted
+        # iterations after each episode (range (1, None)): rho critic steps per env step and no more; the floor adds
+        # 16-27% of the critic steps on Hopper-v5 and Walker2d-v5 (research/frontier_critics)
         Algo(
             "soft_crossq_wide_rho15_nofloor",
             "soft_denfac",
-            "SoftDENFAC (rho 1.5 without the floor, CrossQ's critic 256-256, batch 128)",
+            "SoftDENFAC (the preset without the floor)",
             "paper",
-            base="soft_crossq_wide_rho15",
+            base="denfac_data_efficient",
             overrides=(("n_fitted_iterations", (1, None)),),
         ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the

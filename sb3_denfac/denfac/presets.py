@@ -1,4 +1,4 @@
-"""DENFAC's one alternative to its default: the paper's Algorithm 1 (:data:`PAPER`), one argument set apart.
+"""The DENFAC family's presets: constructor arguments, each for one algorithm (:data:`OWNERS`).
 
 ``DENFAC("MlpPolicy", env)`` is the library default: the constructor's defaults and :class:`~.policies.DENFACPolicy`'s
 (fitted iterations of mini-batch Adam steps on a kept actor and critic, a proximal actor update, two critics whose
@@ -11,6 +11,10 @@ term), one critic and the deterministic next action pi(s') in eq. (4), Retrace-s
 weights, Adam step 0.1 with beta1 = 0 (the authors' solver), sigma = 0.05. The per-env values of Figure 5 (D, reset
 critic, inverting gradients, gamma, actor sizes, learning rates) are in the zoo YAML entries of the paper's envs, which
 start from this preset (``preset: paper``, :mod:`sb3_denfac.zoo.config`).
+
+``SoftDENFAC("MlpPolicy", env, **DATA_EFFICIENT)`` spends more compute per env step for fewer env steps: SAC's actor
+with CrossQ's critic inside the fitted iterations. :data:`DENFAC_DATA_EFFICIENT` is the same dial on DENFAC's own
+networks and deterministic actor, at a fraction of the CPU.
 """
 
 from __future__ import annotations
@@ -47,12 +51,31 @@ PAPER: dict[str, Any] = {
 }
 
 
-#: The compute dial's data-efficient end (docs/denfac.md, "The compute dial"): at least Algorithm 1's K = 10 fitted
-#: iterations after every episode, and about 4 critic steps per collected env step beyond (``update_to_data_ratio``
-#: with the range ``(10, None)``, :mod:`~.options`), with eq. (4)'s bootstrap value kept inside the discounted returns
-#: the rewards in D allow (``bootstrap_bounds``), which stops the critic feeding on its own overestimates over the
-#: many more fitted iterations. Everything else is the default's.
+#: The data-efficient preset, SoftDENFAC's (docs/denfac.md, "The data-efficient preset"): SAC's squashed Gaussian actor
+#: (eq. 7) with CrossQ's critic (Bhatt et al. 2024) inside Algorithm 1's fitted iterations. The critic is batch
+#: renormalised and has no frozen copy: each step reads Q(s, a) and the bootstrap Q(s', a') of eq. (4) in one joint
+#: pass, so both see the same normalisation statistics (``frozen_targets=False``, ``batch_renorm``). It is 256-256
+#: wide (SAC's width) on mini-batches of 128 (a joint pass of 256 rows). The compute dial runs about rho = 1.5 critic
+#: steps per collected env step (``update_to_data_ratio``) and at least Algorithm 1's K = 10 fitted iterations after
+#: every episode (``n_fitted_iterations=(10, None)``, :mod:`~.options`). Eq. (4)'s bootstrap value stays inside the
+#: discounted returns the rewards in D allow (``bootstrap_bounds``). Everything else is SoftDENFAC's default (64-64
+#: actor, alpha tuned, Adam 1e-3). For DENFAC's own actor: :data:`DENFAC_DATA_EFFICIENT`.
 DATA_EFFICIENT: dict[str, Any] = {
+    "update_to_data_ratio": 1.5,
+    "n_fitted_iterations": (10, None),
+    "bootstrap_bounds": True,
+    "frozen_targets": False,
+    "batch_size": 128,
+    "policy_kwargs": {"batch_renorm": True, "net_arch": {"pi": [64, 64], "qf": [256, 256]}},
+}
+
+#: The compute dial's data-efficient end on DENFAC's default networks and deterministic actor (docs/denfac.md, "The
+#: compute dial"), the preset of versions up to 0.5: at least Algorithm 1's K = 10 fitted iterations after every
+#: episode, and about 4 critic steps per collected env step beyond (``update_to_data_ratio`` with the range
+#: ``(10, None)``, :mod:`~.options`), with eq. (4)'s bootstrap value kept inside the discounted returns the rewards in D
+#: allow (``bootstrap_bounds``), which stops the critic feeding on its own overestimates over the many more fitted
+#: iterations. Everything else is the default's. ``DENFAC("MlpPolicy", env, **DENFAC_DATA_EFFICIENT)``.
+DENFAC_DATA_EFFICIENT: dict[str, Any] = {
     "update_to_data_ratio": 4.0,
     "n_fitted_iterations": (10, None),
     "bootstrap_bounds": True,
@@ -82,7 +105,7 @@ GOALS: dict[str, Any] = {
 
 
 def data_efficient(**overrides: Any) -> dict[str, Any]:
-    """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=2`` (half the
+    """:data:`DATA_EFFICIENT` with ``overrides`` (:func:`with_overrides`), e.g. ``update_to_data_ratio=1`` (a third less
     compute)."""
     return with_overrides(DATA_EFFICIENT, overrides)
 
@@ -104,18 +127,33 @@ def paper(**overrides: Any) -> dict[str, Any]:
     return with_overrides(PAPER, overrides)
 
 
-#: The presets by name (``presets.<NAME>``): constructor arguments of DENFAC.
-PRESETS: dict[str, dict[str, Any]] = {"PAPER": PAPER, "DATA_EFFICIENT": DATA_EFFICIENT, "GOALS": GOALS}
+#: The presets by name (``presets.<NAME>``): constructor arguments of the algorithm :data:`OWNERS` names.
+PRESETS: dict[str, dict[str, Any]] = {
+    "PAPER": PAPER,
+    "DATA_EFFICIENT": DATA_EFFICIENT,
+    "DENFAC_DATA_EFFICIENT": DENFAC_DATA_EFFICIENT,
+    "GOALS": GOALS,
+}
+
+#: Each preset's algorithm (its class name): the one whose constructor it is measured and documented with.
+OWNERS: dict[str, str] = {
+    "PAPER": "DENFAC",
+    "DATA_EFFICIENT": "SoftDENFAC",
+    "DENFAC_DATA_EFFICIENT": "DENFAC",
+    "GOALS": "DENFAC",
+}
 
 
 def foreign_preset_message(algorithm: str, keywords: Collection[str], not_taken: Collection[str]) -> str | None:
     """Why ``algorithm``'s constructor refuses ``not_taken`` (keyword arguments it does not take) when ``keywords``, all
-    those given, hold every key of one of :data:`PRESETS`: that preset is DENFAC's. None when no preset was given."""
+    those given, hold every key of one of :data:`PRESETS`: that preset is another algorithm's (:data:`OWNERS`). None
+    when no preset was given."""
     for name, preset in PRESETS.items():
         if set(preset) <= set(keywords) and set(not_taken) & set(preset):
             keys = ", ".join(repr(key) for key in not_taken)
+            owner = OWNERS[name]
             return (
-                f"presets.{name} is DENFAC's preset, and {algorithm} does not take {keys}: use "
-                f'DENFAC("MlpPolicy", env, **presets.{name}), or give {algorithm} only arguments it takes'
+                f"presets.{name} is {owner}'s preset, and {algorithm} does not take {keys}: use "
+                f'{owner}("MlpPolicy", env, **presets.{name}), or give {algorithm} only arguments it takes'
             )
     return None

@@ -61,10 +61,13 @@ class ZooConfigError(ValueError):
 
 
 #: ``preset: <name>`` in a YAML entry: the constructor arguments the entry starts from; the entry's own keys override
-#: them, ``policy_kwargs`` merged key by key (:func:`expand_preset`). Name -> (its algorithm, "module:attribute").
+#: them, ``policy_kwargs`` merged key by key (:func:`expand_preset`). Name -> (its algorithm, "module:attribute"); the
+#: algorithm is the preset's owner (:data:`sb3_denfac.denfac.presets.OWNERS`, written here by zoo name so that reading a
+#: YAML file imports no torch).
 PRESETS: dict[str, tuple[str, str]] = {
     "paper": ("denfac", "sb3_denfac.denfac.presets:PAPER"),
-    "data_efficient": ("denfac", "sb3_denfac.denfac.presets:DATA_EFFICIENT"),
+    "data_efficient": ("soft_denfac", "sb3_denfac.denfac.presets:DATA_EFFICIENT"),
+    "denfac_data_efficient": ("denfac", "sb3_denfac.denfac.presets:DENFAC_DATA_EFFICIENT"),
 }
 
 
