@@ -173,8 +173,11 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
     ref = frontier_at_budget()
     theirs = runs[runs["algo"] == peer].groupby("env")
     out = []
-    for env in _envs(mine):
+    for env in MUJOCO100K_ENVS:
         here = mine[mine["env"] == env]
+        if here.empty:
+            out.append(f"- {env}: no finished runs yet")
+            continue
         final, n = here["final"].median(), len(here)
         sac, crossq = _published_mean(ref, "SAC (UTD 1)", env), _published_mean(ref, "CrossQ (UTD 1)", env)
         peer_final = theirs["final"].median().get(env, float("nan"))
