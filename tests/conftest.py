@@ -267,6 +267,10 @@ class TargetActionEnv(gym.Env):
         truncated = self.t >= self.episode_length
         return self.np_random.uniform(-1, 1, 2).astype(np.float32), reward, False, truncated, {}
 
+    def distance_to_target(self, model: Any, observations: np.ndarray) -> float:
+        """The mean distance of ``model``'s deterministic actions on ``observations`` to the rewarded action."""
+        return float(np.abs(model.predict(observations, deterministic=True)[0] - self.target).mean())
+
 
 @pytest.fixture
 def target_action_env() -> type[gym.Env]:

@@ -277,9 +277,9 @@ def test_soft_denfac_learns_target_action(target_action_env):
     env = target_action_env()
     model = SoftDENFAC("MlpPolicy", env, **SMALL, ent_coef="auto_0.01")
     obs = np.stack([env.observation_space.sample() for _ in range(64)])
-    start = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    start = env.distance_to_target(model, obs)
     model.learn(200)
-    end = np.abs(model.predict(obs, deterministic=True)[0] - 0.6).mean()
+    end = env.distance_to_target(model, obs)
     assert end < 0.1 and end < start / 2, (start, end)
 
 
