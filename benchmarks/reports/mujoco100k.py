@@ -172,6 +172,7 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
         return [f"- no finished runs of `{algo}` yet"]
     ref = frontier_at_budget()
     theirs = runs[runs["algo"] == peer].groupby("env")
+    peer_n, peer_final, peer_cpu = theirs.size(), theirs["final"].median(), theirs["cpu_time"].median()
     out = []
     for env in MUJOCO100K_ENVS:
         here = mine[mine["env"] == env]
@@ -180,10 +181,9 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
             continue
         final, n = here["final"].median(), len(here)
         sac, crossq = _published_mean(ref, "SAC (UTD 1)", env), _published_mean(ref, "CrossQ (UTD 1)", env)
-        peer_final = theirs["final"].median().get(env, float("nan"))
         checks = [
             ("the published SAC", sac),
-            (f"SB3 SAC here ({theirs.size().get(env, 0)} seeds)", peer_final),
+            (f"SB3 SAC here ({peer_n.get(env, 0)} seeds)", peer_final.get(env, float("nan"))),
             ("half the published CrossQ", crossq / 2),
         ]
         verdicts = [
@@ -192,13 +192,14 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
             if not np.isnan(level)
         ]
         ratio = _median(here["final_over_best"])
-        cpu, peer_cpu = here["cpu_time"].median(), theirs["cpu_time"].median().get(env, float("nan"))
-        cpu_words = "no SAC runs" if np.isnan(peer_cpu) else f"{cpu / peer_cpu:.2f}x SB3 SAC's"
+        cpu, sac_cpu = here["cpu_time"].median(), peer_cpu.get(env, float("nan"))
+        cpu_words = (
+            "no SAC runs" if np.isnan(sac_cpu) else f"{cpu / sac_cpu:.2f}x SB3 SAC's ({'met' if cpu <= sac_cpu else 'missed'})"
+        )
         out.append(
             f"- {env} ({n} seed{'s' if n != 1 else ''}): final {final:.0f}; "
             + "; ".join(verdicts)
             + f"; final / best {ratio:.2f} ({'met' if ratio >= 0.8 else 'missed'}); CPU {cpu:,.0f} s, {cpu_words}"
-            + (" (met)" if cpu <= peer_cpu else " (missed)" if not np.isnan(peer_cpu) else "")
         )
     return out
 

@@ -176,10 +176,10 @@ ALGOS: dict[str, Algo] = {
             base="soft_crossq_wide",
             overrides=(("update_to_data_ratio", 1.0),),
         ),
-        # the same at rho 1.5 (the data-efficient preset: its runs were recorded under this row's name,
-        # soft_crossq_wide_rho15, before the preset took its settings) without Algorithm 1's floor of 10 fitted
-        # iterations after each episode (range (1, None)): rho critic steps per env step and no more; the floor adds
-        # 16-27% of the critic steps on Hopper-v5 and Walker2d-v5 (research/frontier_critics)
+        # the data-efficient preset (the wide pair at rho 1.5; its runs before it became the preset were recorded as
+        # soft_crossq_wide_rho15) without Algorithm 1's floor of 10 fitted iterations after each episode (range
+        # (1, None)): rho critic steps per env step and no more; the floor adds 16-27% of the critic steps on
+        # Hopper-v5 and Walker2d-v5 (research/frontier_critics)
         Algo(
             "soft_crossq_wide_rho15_nofloor",
             "soft_denfac",
