@@ -188,6 +188,26 @@ ALGOS: dict[str, Algo] = {
             base="denfac_data_efficient",
             overrides=(("n_fitted_iterations", (1, None)),),
         ),
+        # the preset with CrossQ's Adam (beta1 0.5 for the actor and the critic, sb3-contrib's and sbx's CrossQ
+        # default): a shorter memory of past gradients while the batch renormalisation's statistics drift; the probe of
+        # what holds the gait the preset finds on Hopper-v5 and loses (final / best 0.23-0.94 there)
+        Algo(
+            "soft_crossq_wide_rho15_beta05",
+            "soft_denfac",
+            "SoftDENFAC (the preset with Adam beta1 0.5)",
+            "paper",
+            base="denfac_data_efficient",
+            overrides=(
+                (
+                    "policy_kwargs",
+                    {
+                        "batch_renorm": True,
+                        "net_arch": {"pi": [64, 64], "qf": [256, 256]},
+                        "optimizer_kwargs": {"betas": (0.5, 0.999)},
+                    },
+                ),
+            ),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(
