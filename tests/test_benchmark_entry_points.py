@@ -237,6 +237,28 @@ def test_frontier_critics_study_scripts(tmp_path, capsys):
     assert "rho2 (suite)" in set(table["row"]) and set(table["env"]) <= {"Hopper-v5", "Walker2d-v5"}
 
 
+def test_frontier_critics_checkpoint_probe(tmp_path):
+    """``research/frontier_critics/checkpoint_probe.py``: each evaluation point evaluates the best training episode's
+    actor beside the last one, and records which episode it was (the best return of the episodes before it)."""
+    from research.frontier_critics import checkpoint_probe
+
+    out = tmp_path / "checkpoint.jsonl"
+    rows_file = REPO / "research/frontier_critics/rows.yml"
+    args = ["--rows-file", str(rows_file), "--rows", "soft_droq", "--envs", "Pendulum-v1", "--steps", "600"]
+    checkpoint_probe.main(
+        [*args, "--eval-every", "200", "--eval-episodes", "1", "--out", str(out)],
+        evaluations=checkpoint_probe.CheckpointEvaluations,
+    )
+    (record,) = [json.loads(line) for line in out.read_text().splitlines()]
+    checks = record["checkpoint_evaluations"]
+    assert len(checks) == len(record["evaluations"]) == 3
+    returns = record["episode_returns"]
+    for check in checks:
+        seen = returns[: check["episode"]]
+        assert check["mean"] is not None and check["training_return"] == pytest.approx(max(seen), abs=0.01)
+        assert returns[check["episode"] - 1] == pytest.approx(max(seen), abs=0.01)
+
+
 def test_zero_action_reference_stands_on_ant():
     """``research/frontier_critics/zero_action.py``: the reference docs/results.md quotes, that on Ant-v5 the zero
     action stands a whole episode (1000 steps) and scores above the published SAC's 747 at 100k steps."""

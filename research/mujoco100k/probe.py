@@ -58,6 +58,10 @@ class StepEvaluations(BaseCallback):
         self.n_episodes += int(np.sum(self.locals.get("dones", [False])))
         return True
 
+    def record(self) -> dict[str, Any]:
+        """What a study's subclass adds to the run's record (nothing here)."""
+        return {}
+
     def _on_rollout_start(self) -> None:
         if self.model.num_timesteps >= self.next_at:
             self.evaluate()
@@ -84,9 +88,11 @@ def run_one(
     episodes: int,
     log: Path | None = None,
     algorithm: type | None = None,
+    evaluations: type[StepEvaluations] = StepEvaluations,
 ) -> dict:
     """One run of ``row`` (module docstring); ``algorithm``: a class to build instead of the one its ``algo`` names
-    (a study's subclass, e.g. with its own ``updater_classes``), the record keeping the row's ``algo``."""
+    (a study's subclass, e.g. with its own ``updater_classes``), the record keeping the row's ``algo``;
+    ``evaluations``: the evaluation callback's class (a study's subclass that evaluates more than the policy)."""
     import torch as th
 
     import sb3_denfac  # noqa: F401 (registers the envs)
@@ -117,7 +123,7 @@ def run_one(
         from stable_baselines3.common.logger import configure
 
         model.set_logger(configure(str(log / f"{name}_{env_id}_{seed}"), ["csv"]))
-    callback = StepEvaluations(eval_env, every, episodes)
+    callback = evaluations(eval_env, every, episodes)
     cpu, wall = time.process_time(), time.time()
     model.learn(steps, callback=callback)
     cpu, wall = time.process_time() - cpu, time.time() - wall
@@ -139,6 +145,7 @@ def run_one(
         "commit": git_commit(),
         "machine": platform.processor() or platform.machine(),
         "load": load,
+        **callback.record(),
     }
 
 
@@ -153,15 +160,22 @@ def done_cells(path: Path) -> set[tuple[str, str, int]]:
     return cells
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(
+    argv: list[str] | None = None,
+    evaluations: type[StepEvaluations] = StepEvaluations,
+    out: Path = HERE / "runs.jsonl",
+    description: str | None = None,
+) -> None:
+    """The command line (module docstring); a study's script passes its own evaluation callback, runs file and
+    description."""
+    parser = argparse.ArgumentParser(description=description or __doc__.split("\n\n")[0])
     parser.add_argument("--rows", nargs="+", required=True)
     parser.add_argument("--envs", nargs="+", default=["HalfCheetah-v5", "Hopper-v5"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument("--eval-every", type=int, default=10_000)
     parser.add_argument("--eval-episodes", type=int, default=10)
-    parser.add_argument("--out", type=Path, default=HERE / "runs.jsonl")
+    parser.add_argument("--out", type=Path, default=out)
     parser.add_argument("--log", type=Path, default=None, help="a folder for each run's SB3 logger output (CSV)")
     parser.add_argument("--rows-file", type=Path, default=ROWS, help="the rows' YAML file (another study's)")
     args = parser.parse_args(argv)
@@ -178,7 +192,17 @@ def main(argv: list[str] | None = None) -> None:
             for name in args.rows:
                 if (name, env_id, seed) in done:
                     continue
-                record = run_one(name, rows[name], env_id, seed, args.steps, args.eval_every, args.eval_episodes, args.log)
+                record = run_one(
+                    name,
+                    rows[name],
+                    env_id,
+                    seed,
+                    args.steps,
+                    args.eval_every,
+                    args.eval_episodes,
+                    args.log,
+                    evaluations=evaluations,
+                )
                 with args.out.open("a") as f:
                     f.write(json.dumps(record) + "\n")
                 evals = [round(e["mean"]) for e in record["evaluations"]]
