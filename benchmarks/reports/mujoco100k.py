@@ -226,6 +226,7 @@ ROW_COLOURS = {
     "soft_crossq_wide_rho1": "mediumseagreen",
     "soft_crossq_wide_rho15_nofloor": "darkcyan",
     "soft_crossq_wide_rho15_beta05": "steelblue",
+    "soft_crossq_wide_rho15_checkpoints": "darkred",
     "soft_crossq_anchor": "olive",
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",

@@ -208,6 +208,16 @@ ALGOS: dict[str, Algo] = {
                 ),
             ),
         ),
+        # the preset with TD7's policy checkpoints (one assessment episode): the actor of the best training episode so
+        # far plays the evaluations; training is the preset's, so each cell pairs with the preset's cell of its seed
+        Algo(
+            "soft_crossq_wide_rho15_checkpoints",
+            "soft_denfac",
+            "SoftDENFAC (the preset with policy checkpoints)",
+            "paper",
+            base="denfac_data_efficient",
+            overrides=(("checkpoint_episodes", 1),),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(

@@ -187,6 +187,7 @@ SUITES: dict[str, Suite] = {
                         "soft_crossq_wide_rho1",
                         "soft_crossq_wide_rho15_nofloor",
                         "soft_crossq_wide_rho15_beta05",
+                        "soft_crossq_wide_rho15_checkpoints",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,

@@ -51,6 +51,18 @@ comes on an env without a time limit. Algorithm 1 updates after every episode, w
   the running update, publishes it, and ends the thread before the exception propagates. ``save`` during ``learn``
   writes the last published policy (possibly a snapshot inside an update).
 
+- **Policy checkpoints** (``checkpoint_episodes`` n >= 1; TD7's, Fujimoto et al. 2023, "For SALE", section 5). The
+  actor changes only at episode ends, so an episode is a rollout of one actor, and its return (the exploring actions
+  included) an assessment of it. The training episodes that one actor played whole (not its warm-up, not cut by the
+  budget, not begun under another actor) assess it, up to n of them; while its assessment runs, the updates of the
+  episodes that end wait (with n = 1 nothing waits). It ends at its n-th episode, or earlier at an episode whose
+  return falls below the best assessment so far; its value is the minimum of its episodes' returns. An actor whose
+  value is at least the best so far is copied into the policy (``policy.checkpoint_actor``), which plays
+  ``predict(deterministic=True)`` from then on; exploration and the updates keep the current actor. Only one
+  assessment per actor: with several envs, the first of its whole episodes to end starts it. The copy is a module of the
+  policy (saved with it), the best value so far is the model's ``checkpoint_return``. The asynchronous update changes
+  the actor inside every episode (above), so the two are refused together.
+
 ``learn`` runs with ``torch_threads`` torch threads (:mod:`~sb3_denfac.common.threads`). A subclass provides
 :meth:`_explore`, :meth:`_fit_all`, :meth:`_record` and :meth:`_create_aliases`, calls :meth:`_run_updates` from its
 ``train`` with what :meth:`_finished_episodes` hands it, :meth:`_offer_snapshot` between its fitted iterations and
@@ -80,6 +92,8 @@ from sb3_denfac.common.threads import DEFAULT_TORCH_THREADS, torch_threads
 #: the most envs with which the asynchronous update held the return in every seed where it was measured (Reacher-v5,
 #: 2 envs; with 4 one seed of 3 ran off to the action bounds: :meth:`EpisodicOffPolicyAlgorithm.learn` warns beyond)
 ASYNC_ENVS_MEASURED = 2
+#: ``_episode_versions``: an env's episode not yet begun, and one that no single actor played whole
+_NEW, _SPOILED = -2, -1
 
 
 class EpisodicBuffer(Protocol):
@@ -116,6 +130,20 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
     #: the learner thread, inside an asynchronous ``learn``
     _learner: BackgroundLearner | None = None
 
+    #: n of the policy checkpoints (module docstring): the most episodes that assess an actor; 0: none
+    checkpoint_episodes: int = 0
+    #: the best assessment of an actor so far, the value of ``policy.checkpoint_actor`` (None: none yet)
+    checkpoint_return: float | None = None
+    #: counts the changes of ``self.policy``'s networks (an update in place, a published update or snapshot)
+    _policy_version: int = 0
+    #: per env, the return of its running episode, and the policy version that played all of it (:data:`_NEW`: none
+    #: yet, :data:`_SPOILED`: more than one, or the warm-up's actions); None like ``_episode_steps``
+    _episode_returns: np.ndarray | None = None
+    _episode_versions: np.ndarray | None = None
+    #: the policy version of the actor assessed last, and the returns of its whole episodes (None: its assessment ended)
+    _assessed_version: int = -1
+    _assessed: list[float] | None = None
+
     # ----- what the subclass provides ------------------------------------------------------------------------------
     def _explore(self, observation: Any) -> tuple[np.ndarray, np.ndarray]:
         """The actions to play at ``observation`` (one row per env, in the scaled [-1, 1] space) and the behaviour
@@ -151,6 +179,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         self._budget = total_timesteps if reset_num_timesteps else self.num_timesteps + total_timesteps
         if reset_num_timesteps or self._last_obs is None:  # SB3 resets the envs: new episodes
             self._episode_steps, self._finished = None, None
+            self._episode_returns, self._episode_versions = None, None
         tb_log_name = type(self).__name__ if tb_log_name is None else tb_log_name
         arguments = (total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
         with torch_threads(self.torch_threads):
@@ -203,7 +232,8 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         num_collected_steps, num_collected_episodes = 0, 0
         callback.on_rollout_start()
         while True:
-            if self.num_timesteps < learning_starts:
+            warm_up = self.num_timesteps < learning_starts
+            if warm_up:
                 buffer_actions, behaviour_means = warm_up_actions(self.policy, self.action_space, env.num_envs)
             else:
                 buffer_actions, behaviour_means = self._explore(self._last_obs)
@@ -219,8 +249,9 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
             self._store_transition(replay_buffer, buffer_actions, new_obs, rewards, dones, infos)
             self._update_current_progress_remaining(self.num_timesteps, self._budget)
             self._on_step()
-            self._publish(wait=False)  # an asynchronous update that has ended: the policy of the next step
             budget_reached = self._budget_reached()
+            assessing = self._assess_episodes(rewards, dones, warm_up, budget_reached)  # the actor that played them
+            self._publish(wait=False)  # an asynchronous update that has ended: the policy of the next step
             self._count_episode_steps(np.ones_like(dones) if budget_reached else dones)
             for done in dones:
                 if done:
@@ -228,7 +259,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
                     self._episode_num += 1
                     if log_interval is not None and self._episode_num % log_interval == 0:
                         self.dump_logs()
-            if budget_reached or np.any(dones):
+            if budget_reached or (np.any(dones) and not assessing):
                 break
         callback.on_rollout_end()
         return RolloutReturn(num_collected_steps * env.num_envs, num_collected_episodes, continue_training=True)
@@ -253,12 +284,54 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         finished, self._finished = self._finished, []
         return finished
 
+    # ----- policy checkpoints (module docstring) --------------------------------------------------------------------
+    def _assess_episodes(self, rewards: np.ndarray, dones: np.ndarray, warm_up: bool, budget_reached: bool) -> bool:
+        """After an env step, before the policy may change: add ``rewards`` (the env's own, before ``VecNormalize``) to
+        each env's episode return, and assess the actor with the episodes it played whole that end now (``dones``).
+        Returns whether the actor's assessment goes on (the updates of the episodes that end wait for it)."""
+        if self.checkpoint_episodes == 0:
+            return False
+        n_envs, version = len(dones), self._policy_version
+        if self._episode_versions is None or self._episode_returns is None or len(self._episode_versions) != n_envs:
+            self._episode_returns, self._episode_versions = np.zeros(n_envs), np.full(n_envs, _NEW)
+        versions, returns = self._episode_versions, self._episode_returns
+        versions[versions == _NEW] = version
+        versions[(versions != version) | warm_up] = _SPOILED
+        vec_normalize = self._vec_normalize_env
+        returns += vec_normalize.get_original_reward() if vec_normalize is not None else rewards
+        for env_index in np.flatnonzero(dones):
+            if versions[env_index] == version:
+                self._assess(float(returns[env_index]))
+        versions[dones] = _NEW
+        returns[dones] = 0.0
+        if budget_reached:  # the episodes cut here go on in the next learn(): not whole
+            versions[~np.asarray(dones, dtype=bool)] = _SPOILED
+        return self._assessed_version == version and bool(self._assessed)
+
+    def _assess(self, episode_return: float) -> None:
+        """A whole episode of the current actor returned ``episode_return``: its assessment takes it. The assessment
+        ends at its n-th episode, where the actor is kept if their minimum is at least the best so far, or earlier at
+        an episode below that best. One assessment per actor: once it ended, the actor's episodes are not read."""
+        if self._assessed_version != self._policy_version:
+            self._assessed_version, self._assessed = self._policy_version, []
+        if self._assessed is None:
+            return
+        self._assessed.append(episode_return)
+        best = self.checkpoint_return
+        if best is not None and episode_return < best:
+            self._assessed = None
+        elif len(self._assessed) == self.checkpoint_episodes:
+            self.policy.save_checkpoint()
+            self.checkpoint_return = min(self._assessed)
+            self._assessed = None
+
     # ----- the update: in place, or on the learner thread ----------------------------------------------------------
     def _run_updates(self, *plan: Any) -> None:
         """The updates that ``plan`` describes (:meth:`_fit_all`'s arguments after the policy and the data): here, or
         inside an asynchronous ``learn`` on the learner thread (module docstring)."""
         if self._learner is None:
             self._record(self._fit_all(self.policy, self.replay_buffer.all_samples(env=self._vec_normalize_env), *plan))
+            self._policy_version += 1
             return
         if self._learner.busy:  # the update still running: its updates not started are dropped (module docstring)
             self._learner.request_end()
@@ -302,12 +375,22 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
             self.policy = policy
             self._create_aliases()
             self._record(fits)
+            self._policy_version += 1
             return
         snapshot = learner.take_offer()
         if snapshot is not None:
             snapshot.set_training_mode(False)
             self.policy = snapshot
             self._create_aliases()
+            self._policy_version += 1
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_budget", "_episode_steps", "_finished", "_learner", "_warned_async_envs"]
+        running = ["_budget", "_episode_steps", "_finished", "_learner", "_warned_async_envs", "_policy_version"]
+        return [
+            *super()._excluded_save_params(),
+            *running,
+            "_episode_returns",
+            "_episode_versions",
+            "_assessed_version",
+            "_assessed",
+        ]

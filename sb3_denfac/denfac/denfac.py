@@ -106,6 +106,12 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     :param reset_every: re-initialise the actor and the critic, with fresh Adam states, at the first update at or past every
         ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high update-to-data ratios:
         SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
+    :param checkpoint_episodes: n of TD7's policy checkpoints (Fujimoto et al. 2023, section 5;
+        :mod:`~sb3_denfac.common.episodic`): each actor is assessed on up to n training episodes it plays whole (the
+        updates wait meanwhile; with n = 1 nothing waits), and the actor whose assessment, the minimum of their returns,
+        is the best so far is kept (``policy.checkpoint_actor``) and plays ``predict(deterministic=True)``; exploration
+        and the updates keep the current actor. 0 (default, Algorithm 1): the current actor plays. Not with
+        ``async_update``
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which the
         last published policy plays (:mod:`~sb3_denfac.common.episodic`: what changes; default False: the update runs between
         episodes, reproducible from the seed)
@@ -175,6 +181,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         async_update: bool = False,
         frozen_targets: bool = True,
         reset_every: int | None = None,
+        checkpoint_episodes: int = 0,
         replay_buffer_class: type[ReplayBuffer] | None = None,
         replay_buffer_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -230,8 +237,9 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
         check_update_path(self.update_path, FitSettings.of(self))  # "fast" with an option it does not implement
 
     def _policy_settings(self) -> dict[str, Any]:
-        """The algorithm's settings its policy is built with (on top of ``policy_kwargs``): the exploration's sigma."""
-        return dict(sigma=self.sigma)
+        """The algorithm's settings its policy is built with (on top of ``policy_kwargs``): the exploration's sigma, and
+        whether it keeps a checkpoint actor (``checkpoint_episodes``)."""
+        return dict(sigma=self.sigma, checkpoints=self.checkpoint_episodes > 0)
 
     def _create_aliases(self) -> None:
         self.actor = self.policy.actor

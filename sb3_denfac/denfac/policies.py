@@ -197,10 +197,15 @@ class DENFACBasePolicy(BasePolicy):
         all of them (:class:`DENFACCritic`)
     :param residual: the critic's Q networks are SimBa's residual networks (default False; Lee et al. 2025: a linear
         embedding, one pre-layer-norm residual block per entry of ``net_arch["qf"]``, a final layer norm)
+    :param checkpoints: keep ``checkpoint_actor``, a copy of the actor that :meth:`save_checkpoint` writes and that
+        plays ``predict(deterministic=True)`` (TD7's policy checkpoints; the algorithm's ``checkpoint_episodes``
+        decides when; default False)
     """
 
     actor: nn.Module
     critic: DENFACCritic
+    #: the kept actor of ``checkpoints`` (None without)
+    checkpoint_actor: nn.Module | None
 
     def __init__(
         self,
@@ -226,6 +231,7 @@ class DENFACBasePolicy(BasePolicy):
         batch_renorm: bool = False,
         target_subset: int | None = None,
         residual: bool = False,
+        checkpoints: bool = False,
     ):
         super().__init__(
             observation_space,
@@ -262,6 +268,7 @@ class DENFACBasePolicy(BasePolicy):
         self.dropout = check_number("dropout", dropout, minimum=0.0, maximum=0.9, note=" (0: none; DroQ: 0.01)")
         self.batch_renorm = check_bool("batch_renorm", batch_renorm)
         self.residual = check_bool("residual", residual)
+        self.checkpoints = check_bool("checkpoints", checkpoints)
         self.critic_kwargs = {
             **common,
             "net_arch": archs["qf"],
@@ -279,6 +286,17 @@ class DENFACBasePolicy(BasePolicy):
         self.critic = DENFACCritic(**self._update_features_extractor(self.critic_kwargs))  # type: ignore[arg-type]
         self.actor.optimizer = self.make_optimizer(self.actor, self.actor_learning_rate, lr_schedule)
         self.critic.optimizer = self.make_optimizer(self.critic, self.critic_learning_rate, lr_schedule)
+        self.checkpoint_actor = None
+        if self.checkpoints:  # a copy, never fitted: no gradients, no optimiser, always in eval mode
+            with th.random.fork_rng(devices=[]):  # its initialisation is written over: the seed's draws stay the same
+                self.checkpoint_actor = self.make_actor().requires_grad_(False)
+            self.save_checkpoint()
+
+    def save_checkpoint(self) -> None:
+        """Copy the actor (weights and running statistics) into ``checkpoint_actor``."""
+        assert self.checkpoint_actor is not None, "a policy built with checkpoints=True"
+        self.checkpoint_actor.load_state_dict(self.actor.state_dict())
+        self.checkpoint_actor.set_training_mode(False)
 
     def make_actor(self) -> nn.Module:
         """The actor, built from ``actor_kwargs``."""
@@ -312,6 +330,7 @@ class DENFACBasePolicy(BasePolicy):
                 batch_renorm=self.batch_renorm,
                 target_subset=self.critic.target_subset,
                 residual=self.residual,
+                checkpoints=self.checkpoints,
             )
         )
         return data
@@ -320,9 +339,12 @@ class DENFACBasePolicy(BasePolicy):
         return self._predict(observation, deterministic=deterministic)
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        return self.actor._predict(observation, deterministic=deterministic)
+        """The actor's action at ``observation``; deterministic, the kept actor's (``checkpoints``)."""
+        actor = self.checkpoint_actor if deterministic and self.checkpoint_actor is not None else self.actor
+        return actor._predict(observation, deterministic=deterministic)
 
     def set_training_mode(self, mode: bool) -> None:
+        """The actor's and the critic's mode (``checkpoint_actor`` stays in eval mode)."""
         self.actor.set_training_mode(mode)
         self.critic.set_training_mode(mode)
         self.training = mode

@@ -69,6 +69,7 @@ SETTINGS = (
     "async_update",
     "frozen_targets",
     "reset_every",
+    "checkpoint_episodes",
     "torch_threads",
 )
 
@@ -106,6 +107,14 @@ def store_settings(model: Any, arguments: dict[str, Any]) -> Any:
     m.async_update = check_bool("async_update", a["async_update"])
     m.frozen_targets = check_bool("frozen_targets", a["frozen_targets"])
     m.reset_every = check_number("reset_every", a["reset_every"], minimum=1, integer=True, none_ok=True, note=" (env steps)")
+    m.checkpoint_episodes = check_number(
+        "checkpoint_episodes", a["checkpoint_episodes"], minimum=0, integer=True, note=" (0: off)"
+    )
+    if m.checkpoint_episodes and m.async_update:
+        raise ValueError(
+            "checkpoint_episodes assesses an actor on the episodes it plays whole, and async_update=True changes the "
+            "actor inside every episode (the update runs beside it): use one or the other"
+        )
     m.torch_threads = check_torch_threads(a["torch_threads"])
     return check_learning_rate("learning_rate", a["learning_rate"])
 

@@ -123,7 +123,7 @@ class SoftDENFAC(DENFAC):
         super()._setup_model()
 
     def _policy_settings(self) -> dict[str, Any]:
-        return dict(ent_coef=self.ent_coef, target_entropy=self.target_entropy)
+        return {**super()._policy_settings(), "ent_coef": self.ent_coef, "target_entropy": self.target_entropy}
 
     def _apply_learning_rates(self, progress_remaining: float) -> dict[str, float]:
         """DENFAC's rates, and the tuned alpha's at the actor's rate (as SB3's SAC)."""
