@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
@@ -65,9 +66,7 @@ def test_one_episode_leaves_training_as_it_was(algo: type[DENFAC]) -> None:
     """n = 1 changes what ``predict(deterministic=True)`` plays, not what is trained: from one seed, the same actor and
     critic as without checkpoints (a run with them pairs with one without)."""
     models = [algo("MlpPolicy", "Pendulum-v1", checkpoint_episodes=n, **SMALL).learn(1000) for n in (0, 1)]
-    plain, checkpointed = (
-        {k: v for k, v in m.policy.state_dict().items() if not k.startswith("checkpoint_actor.")} for m in models
-    )
+    plain, checkpointed = ({k: v for k, v in m.policy.state_dict().items() if not k.startswith("checkpoint_")} for m in models)
     assert same_weights(plain, checkpointed)
 
 
@@ -131,3 +130,95 @@ def test_checkpoints_refuse_the_asynchronous_update() -> None:
         DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=1, async_update=True)
     with pytest.raises(ValueError, match="checkpoint_episodes"):
         DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=-1)
+
+
+def shifted_pendulum(n_envs: int = 1, normalize: bool = False) -> Any:
+    """Pendulum-v1 with 20 added to every reward (positive returns: a return added twice would be kept), in Monitors."""
+    from gymnasium.wrappers import TransformReward
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    env = make_vec_env(lambda: TransformReward(gym.make("Pendulum-v1"), lambda r: r + 20.0), n_envs, seed=0)
+    return VecNormalize(env, norm_obs=False) if normalize else env
+
+
+def test_a_stopping_callback_and_a_cut_episode_do_not_mix_returns() -> None:
+    """Stopped by a callback at an episode's end, then cut by the budget inside one, the run goes on: the kept value is
+    one episode's return, never two added together."""
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+    model = DENFAC("MlpPolicy", shifted_pendulum(), checkpoint_episodes=1, **SMALL)
+    ends = EpisodeEnds()
+    model.learn(10_000, callback=[StopTrainingOnMaxEpisodes(2), ends])
+    model.learn(500, reset_num_timesteps=False, callback=ends)  # episodes end at 600 and 800 steps; cut at 900...
+    model.learn(300, reset_num_timesteps=False, callback=ends)  # ...it ends at 1000, and one more at 1200
+    returns = [e["return"] for e in ends.ends]
+    assert len(returns) == 6 and min(returns) > 0
+    assert model.checkpoint_return == pytest.approx(max(returns), abs=1e-3)
+
+
+def test_updates_held_by_an_assessment_are_not_lost_when_a_callback_stops() -> None:
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+    model = DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=3, **SMALL)
+    model.learn(10_000, callback=StopTrainingOnMaxEpisodes(2))  # two episodes of one actor's assessment: held
+    assert model._n_updates == 0
+    # a new learn: the first episode's held update runs with the next episode's (the callback stopped at the second
+    # episode's last step, which, as in SB3, is not stored, and gets no update)
+    model.learn(200)
+    assert model._n_updates == 2
+
+
+def test_several_envs_assess_the_first_whole_episode_on_the_env_scale() -> None:
+    """Two envs whose episodes end together, rewards normalised by ``VecNormalize``: each actor is assessed once, on
+    env 0's episode (the first to end), with the env's own rewards."""
+    model = DENFAC("MlpPolicy", shifted_pendulum(2, normalize=True), checkpoint_episodes=1, **SMALL)
+    ends = EpisodeEnds()
+    model.learn(2000, callback=ends)
+    first_env = [e["return"] for e in ends.ends[::2]]  # both envs end at the same steps, env 0 first
+    assert model.checkpoint_return == pytest.approx(max(first_env), abs=1e-3)
+
+
+def test_set_parameters_brings_the_kept_actor_and_its_value() -> None:
+    """The kept actor's value is saved with it: another model's parameters bring both, and start a new actor."""
+    a, b = (DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=1, **{**SMALL, "seed": s}).learn(600) for s in (0, 1))
+    version = a._policy_version
+    a.set_parameters(b.get_parameters())
+    assert a.checkpoint_return == b.checkpoint_return and a._policy_version > version
+    assert a.policy.checkpoint_actor is not None and b.policy.checkpoint_actor is not None
+    assert same_weights(a.policy.checkpoint_actor.state_dict(), b.policy.checkpoint_actor.state_dict())
+
+
+def test_load_may_turn_checkpoints_on_or_off(tmp_path: Any) -> None:
+    plain = DENFAC("MlpPolicy", "Pendulum-v1", **SMALL).learn(400)
+    plain.save(tmp_path / "plain")
+    on = DENFAC.load(tmp_path / "plain", checkpoint_episodes=1)  # the kept actor starts as the actor, with no value
+    assert on.checkpoint_return is None and on.policy.checkpoint_actor is not None
+    assert same_weights(on.policy.checkpoint_actor.state_dict(), on.policy.actor.state_dict())
+    with_checkpoints = DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=1, **SMALL).learn(400)
+    with_checkpoints.save(tmp_path / "kept")
+    off = DENFAC.load(tmp_path / "kept", checkpoint_episodes=0)
+    assert off.policy.checkpoint_actor is None and off.checkpoint_return is None
+    with pytest.raises(ValueError, match="async_update"):
+        DENFAC.load(tmp_path / "kept", async_update=True)
+
+
+def test_an_episode_with_an_update_inside_assesses_nothing() -> None:
+    """Two envs whose episodes (200 and 150 steps) end at different steps: up to step 500 every episode but env 1's
+    first has another env's end, and so an update, inside it; it alone is one actor's, and assesses it."""
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    env = DummyVecEnv(
+        [lambda: Monitor(gym.make("Pendulum-v1")), lambda: Monitor(gym.make("Pendulum-v1", max_episode_steps=150))]
+    )
+    model = DENFAC("MlpPolicy", env, checkpoint_episodes=1, **SMALL)
+    assessed: list[float] = []
+    assess = model._assess
+    model._assess = lambda episode_return: (assessed.append(episode_return), assess(episode_return))  # type: ignore[method-assign]
+    model.learn(1000)  # 500 steps of each env: 5 episode ends, then the budget's 2 cut episodes, one update each
+    assert model._n_updates == 7
+    assert assessed == [pytest.approx(model.ep_info_buffer[0]["r"], abs=1e-3)]  # env 1's first episode, steps 0-150
+    # to step 800: both end at 600 with the budget's update (at 500) inside; env 1's episode 600-750 is one actor's
+    model.learn(600, reset_num_timesteps=False)
+    assert len(assessed) == 2

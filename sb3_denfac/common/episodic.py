@@ -53,15 +53,16 @@ comes on an env without a time limit. Algorithm 1 updates after every episode, w
 
 - **Policy checkpoints** (``checkpoint_episodes`` n >= 1; TD7's, Fujimoto et al. 2023, "For SALE", section 5). The
   actor changes only at episode ends, so an episode is a rollout of one actor, and its return (the exploring actions
-  included) an assessment of it. The training episodes that one actor played whole (not its warm-up, not cut by the
-  budget, not begun under another actor) assess it, up to n of them; while its assessment runs, the updates of the
-  episodes that end wait (with n = 1 nothing waits). It ends at its n-th episode, or earlier at an episode whose
-  return falls below the best assessment so far; its value is the minimum of its episodes' returns. An actor whose
-  value is at least the best so far is copied into the policy (``policy.checkpoint_actor``), which plays
-  ``predict(deterministic=True)`` from then on; exploration and the updates keep the current actor. Only one
-  assessment per actor: with several envs, the first of its whole episodes to end starts it. The copy is a module of the
-  policy (saved with it), the best value so far is the model's ``checkpoint_return``. The asynchronous update changes
-  the actor inside every episode (above), so the two are refused together.
+  included) an assessment of it. The training episodes that one actor played whole (no warm-up action, no update or
+  ``set_parameters`` inside; an episode cut by the budget goes on in the next ``learn``) assess it, up to n of them;
+  while its assessment runs, the updates of the episodes that end wait (with n = 1 nothing waits). It ends at its
+  n-th episode, or earlier at an episode whose return falls below the best assessment so far; its value is the
+  minimum of its episodes' returns. An actor whose value is at least the best so far is copied into the policy
+  (``policy.checkpoint_actor``), which plays ``predict(deterministic=True)`` from then on; exploration and the updates
+  keep the current actor. One assessment per actor: with several envs, the first of its whole episodes to end starts
+  it. The copy is a module of the policy, saved with its value (``policy.checkpoint_return``; the model's
+  ``checkpoint_return``, None before the first). The asynchronous update changes the actor inside every episode
+  (above), so the two are refused together.
 
 ``learn`` runs with ``torch_threads`` torch threads (:mod:`~sb3_denfac.common.threads`). A subclass provides
 :meth:`_explore`, :meth:`_fit_all`, :meth:`_record` and :meth:`_create_aliases`, calls :meth:`_run_updates` from its
@@ -77,6 +78,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
+import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.base_class import SelfBaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
@@ -132,12 +134,11 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
 
     #: n of the policy checkpoints (module docstring): the most episodes that assess an actor; 0: none
     checkpoint_episodes: int = 0
-    #: the best assessment of an actor so far, the value of ``policy.checkpoint_actor`` (None: none yet)
-    checkpoint_return: float | None = None
-    #: counts the changes of ``self.policy``'s networks (an update in place, a published update or snapshot)
+    #: counts the changes of ``self.policy``'s networks (an update in place, a published update or snapshot,
+    #: ``set_parameters``); an episode whose version is still the current one at its end was played by one actor
     _policy_version: int = 0
-    #: per env, the return of its running episode, and the policy version that played all of it (:data:`_NEW`: none
-    #: yet, :data:`_SPOILED`: more than one, or the warm-up's actions); None like ``_episode_steps``
+    #: per env, the return of its running episode, and the policy version at its first step (:data:`_NEW`: not begun,
+    #: :data:`_SPOILED`: it has warm-up actions); None like ``_episode_steps``
     _episode_returns: np.ndarray | None = None
     _episode_versions: np.ndarray | None = None
     #: the policy version of the actor assessed last, and the returns of its whole episodes (None: its assessment ended)
@@ -178,7 +179,8 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         # SB3's _setup_learn: total_timesteps counts on from num_timesteps unless reset_num_timesteps
         self._budget = total_timesteps if reset_num_timesteps else self.num_timesteps + total_timesteps
         if reset_num_timesteps or self._last_obs is None:  # SB3 resets the envs: new episodes
-            self._episode_steps, self._finished = None, None
+            # the updates an assessment held (checkpoint_episodes > 1) and a stopping callback left stay due
+            self._episode_steps, self._finished = None, self._finished or None
             self._episode_returns, self._episode_versions = None, None
         tb_log_name = type(self).__name__ if tb_log_name is None else tb_log_name
         arguments = (total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
@@ -243,6 +245,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
             num_collected_steps += 1
             callback.update_locals(locals())
             if not callback.on_step():  # as SB3: the step's transition is not stored
+                self._assess_episodes(rewards, dones, warm_up)  # the episodes that end here start anew
                 return RolloutReturn(num_collected_steps * env.num_envs, num_collected_episodes, continue_training=False)
             self._update_info_buffer(infos, dones)
             replay_buffer.stage_behaviour_means(behaviour_means, self.weighting)
@@ -250,7 +253,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
             self._update_current_progress_remaining(self.num_timesteps, self._budget)
             self._on_step()
             budget_reached = self._budget_reached()
-            assessing = self._assess_episodes(rewards, dones, warm_up, budget_reached)  # the actor that played them
+            assessing = self._assess_episodes(rewards, dones, warm_up)  # by the actor that played them
             self._publish(wait=False)  # an asynchronous update that has ended: the policy of the next step
             self._count_episode_steps(np.ones_like(dones) if budget_reached else dones)
             for done in dones:
@@ -285,7 +288,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         return finished
 
     # ----- policy checkpoints (module docstring) --------------------------------------------------------------------
-    def _assess_episodes(self, rewards: np.ndarray, dones: np.ndarray, warm_up: bool, budget_reached: bool) -> bool:
+    def _assess_episodes(self, rewards: np.ndarray, dones: np.ndarray, warm_up: bool) -> bool:
         """After an env step, before the policy may change: add ``rewards`` (the env's own, before ``VecNormalize``) to
         each env's episode return, and assess the actor with the episodes it played whole that end now (``dones``).
         Returns whether the actor's assessment goes on (the updates of the episodes that end wait for it)."""
@@ -296,7 +299,8 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
             self._episode_returns, self._episode_versions = np.zeros(n_envs), np.full(n_envs, _NEW)
         versions, returns = self._episode_versions, self._episode_returns
         versions[versions == _NEW] = version
-        versions[(versions != version) | warm_up] = _SPOILED
+        if warm_up:  # uniform actions, not the actor's
+            versions[:] = _SPOILED
         vec_normalize = self._vec_normalize_env
         returns += vec_normalize.get_original_reward() if vec_normalize is not None else rewards
         for env_index in np.flatnonzero(dones):
@@ -304,8 +308,6 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
                 self._assess(float(returns[env_index]))
         versions[dones] = _NEW
         returns[dones] = 0.0
-        if budget_reached:  # the episodes cut here go on in the next learn(): not whole
-            versions[~np.asarray(dones, dtype=bool)] = _SPOILED
         return self._assessed_version == version and bool(self._assessed)
 
     def _assess(self, episode_return: float) -> None:
@@ -321,9 +323,19 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         if best is not None and episode_return < best:
             self._assessed = None
         elif len(self._assessed) == self.checkpoint_episodes:
-            self.policy.save_checkpoint()
-            self.checkpoint_return = min(self._assessed)
+            self.policy.save_checkpoint(min(self._assessed))
             self._assessed = None
+
+    @property
+    def checkpoint_return(self) -> float | None:
+        """The value of the kept actor (``checkpoint_episodes``): the best assessment so far; None before the first."""
+        value = getattr(self.policy, "checkpoint_return", None)
+        return None if value is None or not th.isfinite(value) else float(value)
+
+    def set_parameters(self, *args: Any, **kwargs: Any) -> None:
+        """SB3's; the networks loaded are another actor: the running episodes no longer assess one."""
+        super().set_parameters(*args, **kwargs)
+        self._policy_version += 1
 
     # ----- the update: in place, or on the learner thread ----------------------------------------------------------
     def _run_updates(self, *plan: Any) -> None:

@@ -32,7 +32,7 @@ from sb3_denfac.denfac.options import (
     target_actions,
 )
 from sb3_denfac.denfac.policies import DEFAULT_NET_ARCH, DENFACPolicy, MlpPolicy, MultiInputPolicy
-from sb3_denfac.denfac.settings import store_settings, warn_ignored_settings
+from sb3_denfac.denfac.settings import check_checkpoint_episodes, store_settings, warn_ignored_settings
 from sb3_denfac.denfac.update_paths import DENFAC_UPDATERS, UpdaterClasses, check_update_path, make_updater
 from sb3_denfac.denfac.updaters import FitResult, FitSettings, Updater, UpdateStats
 
@@ -230,6 +230,7 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     def _setup_model(self) -> None:
         upgrade_denfac(self)  # a model loaded from a file of an earlier version: that version's settings
         self.replay_buffer_class = replay_buffer_class_for(self, self.replay_buffer_class)
+        check_checkpoint_episodes(self.checkpoint_episodes, self.async_update)  # load may change either
         self.policy_kwargs.update(self._policy_settings())
         super()._setup_model()
         self._create_aliases()

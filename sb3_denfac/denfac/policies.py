@@ -290,13 +290,28 @@ class DENFACBasePolicy(BasePolicy):
         if self.checkpoints:  # a copy, never fitted: no gradients, no optimiser, always in eval mode
             with th.random.fork_rng(devices=[]):  # its initialisation is written over: the seed's draws stay the same
                 self.checkpoint_actor = self.make_actor().requires_grad_(False)
-            self.save_checkpoint()
+            self.register_buffer("checkpoint_return", th.tensor(-th.inf))  # its value, saved with it
+            self.save_checkpoint(-th.inf)
 
-    def save_checkpoint(self) -> None:
-        """Copy the actor (weights and running statistics) into ``checkpoint_actor``."""
+    def save_checkpoint(self, value: float) -> None:
+        """Copy the actor (weights and running statistics) into ``checkpoint_actor``, whose assessment is ``value``."""
         assert self.checkpoint_actor is not None, "a policy built with checkpoints=True"
         self.checkpoint_actor.load_state_dict(self.actor.state_dict())
         self.checkpoint_actor.set_training_mode(False)
+        self.checkpoint_return.fill_(value)
+
+    def load_state_dict(self, state_dict: Any, strict: bool = True, assign: bool = False) -> Any:
+        """``nn.Module``'s, for a file saved with or without ``checkpoints`` into a policy built the other way: a
+        missing kept actor is the actor, with no value yet; a kept actor the policy does not keep is dropped."""
+        state = dict(state_dict)
+        kept = [k for k in state if k.startswith("checkpoint_actor.") or k == "checkpoint_return"]
+        if self.checkpoint_actor is None:
+            for key in kept:
+                del state[key]
+        elif not kept:
+            state.update({"checkpoint_" + k: v for k, v in state_dict.items() if k.startswith("actor.")})
+            state["checkpoint_return"] = th.tensor(-th.inf)
+        return super().load_state_dict(state, strict=strict, assign=assign)
 
     def make_actor(self) -> nn.Module:
         """The actor, built from ``actor_kwargs``."""

@@ -107,16 +107,21 @@ def store_settings(model: Any, arguments: dict[str, Any]) -> Any:
     m.async_update = check_bool("async_update", a["async_update"])
     m.frozen_targets = check_bool("frozen_targets", a["frozen_targets"])
     m.reset_every = check_number("reset_every", a["reset_every"], minimum=1, integer=True, none_ok=True, note=" (env steps)")
-    m.checkpoint_episodes = check_number(
-        "checkpoint_episodes", a["checkpoint_episodes"], minimum=0, integer=True, note=" (0: off)"
-    )
-    if m.checkpoint_episodes and m.async_update:
+    m.checkpoint_episodes = check_checkpoint_episodes(a["checkpoint_episodes"], m.async_update)
+    m.torch_threads = check_torch_threads(a["torch_threads"])
+    return check_learning_rate("learning_rate", a["learning_rate"])
+
+
+def check_checkpoint_episodes(checkpoint_episodes: Any, async_update: bool) -> int:
+    """``checkpoint_episodes``, an int >= 0, and not with ``async_update`` (also checked at ``load``, which may change
+    either)."""
+    n = check_number("checkpoint_episodes", checkpoint_episodes, minimum=0, integer=True, note=" (0: off)")
+    if n and async_update:
         raise ValueError(
             "checkpoint_episodes assesses an actor on the episodes it plays whole, and async_update=True changes the "
             "actor inside every episode (the update runs beside it): use one or the other"
         )
-    m.torch_threads = check_torch_threads(a["torch_threads"])
-    return check_learning_rate("learning_rate", a["learning_rate"])
+    return n
 
 
 def check_soft_settings(ent_coef: Any, target_entropy: Any, prioritized: Any) -> None:
