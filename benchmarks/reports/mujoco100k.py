@@ -186,7 +186,11 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
             (f"SB3 SAC here ({peer_n.get(env, 0)} seeds)", peer_final.get(env, float("nan"))),
             ("half the published CrossQ", crossq / 2),
         ]
-        verdicts = [f"{name} {level:.0f} {_met(final, level)}" for name, level in checks if not np.isnan(level)]
+        verdicts = [  # a shortfall under 1 with one decimal (it would round to 0)
+            f"{name} {level:.0f} " + ("met" if final >= level else f"missed by {level - final:.{int(level - final < 1)}f}")
+            for name, level in checks
+            if not np.isnan(level)
+        ]
         ratio = _median(here["final_over_best"])
         cpu, sac_cpu = here["cpu_time"].median(), peer_cpu.get(env, float("nan"))
         cpu_words = (
@@ -198,12 +202,6 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
             + f"; final / best {ratio:.2f} ({'met' if ratio >= 0.8 else 'missed'}); CPU {cpu:,.0f} s, {cpu_words}"
         )
     return out
-
-
-def _met(value: float, level: float) -> str:
-    """ "met", or "missed by" the shortfall (one decimal below 1, which rounds to 0)."""
-    short = level - value
-    return "met" if short <= 0 else f"missed by {short:.1f}" if short < 1 else f"missed by {short:.0f}"
 
 
 def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
