@@ -1,4 +1,4 @@
-"""TD7's policy checkpoints in the episodic base (``checkpoint_episodes``; :mod:`sb3_denfac.common.episodic`): which
+"""TD7's policy checkpoints in the episodic base (``checkpoint_episodes``; :mod:`sb3_denfac.common.checkpoints`): which
 actor is kept, when updates wait for an assessment, what plays ``predict``, and that it is saved."""
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_denfac import DENFAC, SoftDENFAC
+from sb3_denfac.common.checkpoints import Assessment
 
 # a small update: these tests check the bookkeeping, not learning
 SMALL = dict(batch_size=64, n_fitted_iterations=2, critic_steps=5, actor_steps=5, seed=0)
@@ -214,11 +215,37 @@ def test_an_episode_with_an_update_inside_assesses_nothing() -> None:
     )
     model = DENFAC("MlpPolicy", env, checkpoint_episodes=1, **SMALL)
     assessed: list[float] = []
-    assess = model._assess
-    model._assess = lambda episode_return: (assessed.append(episode_return), assess(episode_return))  # type: ignore[method-assign]
+
+    class Recording(Assessment):
+        def _take(self, episode_return: float, *args: Any) -> float | None:
+            assessed.append(episode_return)
+            return super()._take(episode_return, *args)
+
+    model._assessment = Recording(1)
     model.learn(1000)  # 500 steps of each env: 5 episode ends, then the budget's 2 cut episodes, one update each
     assert model._n_updates == 7
     assert assessed == [pytest.approx(model.ep_info_buffer[0]["r"], abs=1e-3)]  # env 1's first episode, steps 0-150
     # to step 800: both end at 600 with the budget's update (at 500) inside; env 1's episode 600-750 is one actor's
     model.learn(600, reset_num_timesteps=False)
     assert len(assessed) == 2
+
+
+def test_assessment_books() -> None:
+    """:class:`Assessment` alone (n = 2): an actor's whole episodes, the minimum kept if at least the best, an early
+    end below the best, one value per actor, warm-up and episodes begun under another version."""
+    done, going = np.array([True, True]), np.array([False, False])
+    books = Assessment(2)
+    assert books.step(np.array([1.0, 2.0]), going, True, 0, None) is None  # warm-up spoils both running episodes
+    assert books.step(np.array([1.0, 2.0]), done, False, 0, None) is None and not books.going_on(0)
+    books.step(np.array([5.0, 3.0]), going, False, 1, None)
+    assert books.step(np.array([1.0, 1.0]), done, False, 1, None) == 4.0  # both envs end: min(6, 4)
+    assert not books.going_on(1)
+    books.step(np.array([9.0, 9.0]), done, False, 1, 4.0)  # actor 1's assessment has ended: not read again
+    assert books._version == 1 and books._assessed is None
+    assert books.step(np.array([5.0, 0.0]), np.array([True, False]), False, 2, 4.0) is None and books.going_on(2)
+    assert books.step(np.array([0.0, 3.0]), np.array([False, True]), False, 2, 4.0) is None  # 3 < 4: ends early
+    assert not books.going_on(2)
+    books.new_episodes()  # the envs reset: the running episodes are dropped, versions start anew
+    books.step(np.array([7.0, 0.0]), np.array([True, False]), False, 3, 4.0)
+    assert books.going_on(3)
+    assert books.step(np.array([0.0, 8.0]), np.array([False, True]), False, 3, 4.0) == 7.0

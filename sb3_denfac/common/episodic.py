@@ -51,18 +51,11 @@ comes on an env without a time limit. Algorithm 1 updates after every episode, w
   the running update, publishes it, and ends the thread before the exception propagates. ``save`` during ``learn``
   writes the last published policy (possibly a snapshot inside an update).
 
-- **Policy checkpoints** (``checkpoint_episodes`` n >= 1; TD7's, Fujimoto et al. 2023, "For SALE", section 5). The
-  actor changes only at episode ends, so an episode is a rollout of one actor, and its return (the exploring actions
-  included) an assessment of it. The training episodes that one actor played whole (no warm-up action, no update or
-  ``set_parameters`` inside; an episode cut by the budget goes on in the next ``learn``) assess it, up to n of them;
-  while its assessment runs, the updates of the episodes that end wait (with n = 1 nothing waits). It ends at its
-  n-th episode, or earlier at an episode whose return falls below the best assessment so far; its value is the
-  minimum of its episodes' returns. An actor whose value is at least the best so far is copied into the policy
-  (``policy.checkpoint_actor``), which plays ``predict(deterministic=True)`` from then on; exploration and the updates
-  keep the current actor. One assessment per actor: with several envs, the first of its whole episodes to end starts
-  it. The copy is a module of the policy, saved with its value (``policy.checkpoint_return``; the model's
-  ``checkpoint_return``, None before the first). The asynchronous update changes the actor inside every episode
-  (above), so the two are refused together.
+- **Policy checkpoints** (``checkpoint_episodes`` n >= 1; :mod:`~sb3_denfac.common.checkpoints`). After each env
+  step, before the policy may change, :meth:`_assess_episodes` hands the rewards (the env's own, before ``VecNormalize``)
+  and the policy's version (``_policy_version``, which counts its changes) to the running
+  :class:`~sb3_denfac.common.checkpoints.Assessment`, and copies the actor it keeps into the policy. While an
+  assessment runs, the rollout does not end at an episode's end: the updates of the episodes that end wait for it.
 
 ``learn`` runs with ``torch_threads`` torch threads (:mod:`~sb3_denfac.common.threads`). A subclass provides
 :meth:`_explore`, :meth:`_fit_all`, :meth:`_record` and :meth:`_create_aliases`, calls :meth:`_run_updates` from its
@@ -87,6 +80,7 @@ from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 from stable_baselines3.common.type_aliases import MaybeCallback, RolloutReturn, TrainFreq
 from stable_baselines3.common.vec_env import VecEnv
 
+from sb3_denfac.common.checkpoints import Assessment
 from sb3_denfac.common.exploration import warm_up_actions
 from sb3_denfac.common.learner import BackgroundLearner
 from sb3_denfac.common.threads import DEFAULT_TORCH_THREADS, torch_threads
@@ -94,8 +88,6 @@ from sb3_denfac.common.threads import DEFAULT_TORCH_THREADS, torch_threads
 #: the most envs with which the asynchronous update held the return in every seed where it was measured (Reacher-v5,
 #: 2 envs; with 4 one seed of 3 ran off to the action bounds: :meth:`EpisodicOffPolicyAlgorithm.learn` warns beyond)
 ASYNC_ENVS_MEASURED = 2
-#: ``_episode_versions``: an env's episode not yet begun, and one that no single actor played whole
-_NEW, _SPOILED = -2, -1
 
 
 class EpisodicBuffer(Protocol):
@@ -137,13 +129,8 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
     #: counts the changes of ``self.policy``'s networks (an update in place, a published update or snapshot,
     #: ``set_parameters``); an episode whose version is still the current one at its end was played by one actor
     _policy_version: int = 0
-    #: per env, the return of its running episode, and the policy version at its first step (:data:`_NEW`: not begun,
-    #: :data:`_SPOILED`: it has warm-up actions); None like ``_episode_steps``
-    _episode_returns: np.ndarray | None = None
-    _episode_versions: np.ndarray | None = None
-    #: the policy version of the actor assessed last, and the returns of its whole episodes (None: its assessment ended)
-    _assessed_version: int = -1
-    _assessed: list[float] | None = None
+    #: the running assessment of the policy checkpoints (None: none yet, or ``checkpoint_episodes`` is 0)
+    _assessment: Assessment | None = None
 
     # ----- what the subclass provides ------------------------------------------------------------------------------
     def _explore(self, observation: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -181,7 +168,8 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         if reset_num_timesteps or self._last_obs is None:  # SB3 resets the envs: new episodes
             # the updates an assessment held (checkpoint_episodes > 1) and a stopping callback left stay due
             self._episode_steps, self._finished = None, self._finished or None
-            self._episode_returns, self._episode_versions = None, None
+            if self._assessment is not None:  # an assessment running goes on with the new episodes
+                self._assessment.new_episodes()
         tb_log_name = type(self).__name__ if tb_log_name is None else tb_log_name
         arguments = (total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
         with torch_threads(self.torch_threads):
@@ -289,42 +277,21 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
 
     # ----- policy checkpoints (module docstring) --------------------------------------------------------------------
     def _assess_episodes(self, rewards: np.ndarray, dones: np.ndarray, warm_up: bool) -> bool:
-        """After an env step, before the policy may change: add ``rewards`` (the env's own, before ``VecNormalize``) to
-        each env's episode return, and assess the actor with the episodes it played whole that end now (``dones``).
-        Returns whether the actor's assessment goes on (the updates of the episodes that end wait for it)."""
+        """After an env step, before the policy may change: the episodes that end now (``dones``) assess the actor that
+        played them whole (:class:`~sb3_denfac.common.checkpoints.Assessment`, with the env's own ``rewards``, before
+        ``VecNormalize``), which the policy keeps if it is the best so far. Returns whether the actor's assessment goes
+        on (the updates of the episodes that end wait for it)."""
         if self.checkpoint_episodes == 0:
             return False
-        n_envs, version = len(dones), self._policy_version
-        if self._episode_versions is None or self._episode_returns is None or len(self._episode_versions) != n_envs:
-            self._episode_returns, self._episode_versions = np.zeros(n_envs), np.full(n_envs, _NEW)
-        versions, returns = self._episode_versions, self._episode_returns
-        versions[versions == _NEW] = version
-        if warm_up:  # uniform actions, not the actor's
-            versions[:] = _SPOILED
+        if self._assessment is None or self._assessment.episodes != self.checkpoint_episodes:
+            self._assessment = Assessment(self.checkpoint_episodes)
         vec_normalize = self._vec_normalize_env
-        returns += vec_normalize.get_original_reward() if vec_normalize is not None else rewards
-        for env_index in np.flatnonzero(dones):
-            if versions[env_index] == version:
-                self._assess(float(returns[env_index]))
-        versions[dones] = _NEW
-        returns[dones] = 0.0
-        return self._assessed_version == version and bool(self._assessed)
-
-    def _assess(self, episode_return: float) -> None:
-        """A whole episode of the current actor returned ``episode_return``: its assessment takes it. The assessment
-        ends at its n-th episode, where the actor is kept if their minimum is at least the best so far, or earlier at
-        an episode below that best. One assessment per actor: once it ended, the actor's episodes are not read."""
-        if self._assessed_version != self._policy_version:
-            self._assessed_version, self._assessed = self._policy_version, []
-        if self._assessed is None:
-            return
-        self._assessed.append(episode_return)
-        best = self.checkpoint_return
-        if best is not None and episode_return < best:
-            self._assessed = None
-        elif len(self._assessed) == self.checkpoint_episodes:
-            self.policy.save_checkpoint(min(self._assessed))
-            self._assessed = None
+        if vec_normalize is not None:
+            rewards = vec_normalize.get_original_reward()
+        keep = self._assessment.step(rewards, dones, warm_up, self._policy_version, self.checkpoint_return)
+        if keep is not None:
+            self.policy.save_checkpoint(keep)
+        return self._assessment.going_on(self._policy_version)
 
     @property
     def checkpoint_return(self) -> float | None:
@@ -398,11 +365,4 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         running = ["_budget", "_episode_steps", "_finished", "_learner", "_warned_async_envs", "_policy_version"]
-        return [
-            *super()._excluded_save_params(),
-            *running,
-            "_episode_returns",
-            "_episode_versions",
-            "_assessed_version",
-            "_assessed",
-        ]
+        return [*super()._excluded_save_params(), *running, "_assessment"]

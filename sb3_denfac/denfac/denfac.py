@@ -106,12 +106,9 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     :param reset_every: re-initialise the actor and the critic, with fresh Adam states, at the first update at or past every
         ``reset_every`` env steps, keeping D (periodic resets against the loss of plasticity at high update-to-data ratios:
         SR-SAC, D'Oro et al. 2023; BRO, Nauman et al. 2024); None (default): never
-    :param checkpoint_episodes: n of TD7's policy checkpoints (Fujimoto et al. 2023, section 5;
-        :mod:`~sb3_denfac.common.episodic`): each actor is assessed on up to n training episodes it plays whole (the
-        updates wait meanwhile; with n = 1 nothing waits), and the actor whose assessment, the minimum of their returns,
-        is the best so far is kept (``policy.checkpoint_actor``) and plays ``predict(deterministic=True)``; exploration
-        and the updates keep the current actor. 0 (default, Algorithm 1): the current actor plays. Not with
-        ``async_update``
+    :param checkpoint_episodes: n of TD7's policy checkpoints (:mod:`~sb3_denfac.common.checkpoints`): the actor best
+        over up to n whole training episodes plays ``predict(deterministic=True)``. 0 (default, Algorithm 1): the
+        current actor. Not with ``async_update``
     :param async_update: run each end-of-episode update on a learner thread, beside the next episode's env steps, which the
         last published policy plays (:mod:`~sb3_denfac.common.episodic`: what changes; default False: the update runs between
         episodes, reproducible from the seed)
