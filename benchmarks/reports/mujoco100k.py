@@ -227,6 +227,7 @@ ROW_COLOURS = {
     "soft_crossq_wide_rho15_nofloor": "darkcyan",
     "soft_crossq_wide_rho15_beta05": "steelblue",
     "soft_crossq_wide_rho15_checkpoints": "darkred",
+    "soft_crossq_wide_rho15_checkpoints3": "salmon",
     "soft_crossq_anchor": "olive",
     "denfac_data_efficient": "tab:red",
     "sac_zoo": "tab:blue",

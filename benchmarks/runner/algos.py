@@ -218,6 +218,16 @@ ALGOS: dict[str, Algo] = {
             base="denfac_data_efficient",
             overrides=(("checkpoint_episodes", 1),),
         ),
+        # the same judged on the minimum of three whole episodes (TD7's longer assessment, for envs whose episodes start
+        # from random states); the updates of an assessment's episodes wait for its end, so training differs
+        Algo(
+            "soft_crossq_wide_rho15_checkpoints3",
+            "soft_denfac",
+            "SoftDENFAC (the preset with policy checkpoints over three episodes)",
+            "paper",
+            base="denfac_data_efficient",
+            overrides=(("checkpoint_episodes", 3),),
+        ),
         # the same with DENFAC's proximal anchor on the soft actor's mean (lambda 5: an update moves it about 0.1), the
         # screen's `soft_crossq_prox5` (research/frontier_critics: the soft actor's wide first actions fail Ant)
         Algo(

@@ -188,6 +188,7 @@ SUITES: dict[str, Suite] = {
                         "soft_crossq_wide_rho15_nofloor",
                         "soft_crossq_wide_rho15_beta05",
                         "soft_crossq_wide_rho15_checkpoints",
+                        "soft_crossq_wide_rho15_checkpoints3",
                         "soft_crossq_anchor",
                     ),
                     _FIVE,
