@@ -249,3 +249,29 @@ def test_assessment_books() -> None:
     books.step(np.array([7.0, 0.0]), np.array([True, False]), False, 3, 4.0)
     assert books.going_on(3)
     assert books.step(np.array([0.0, 8.0]), np.array([False, True]), False, 3, 4.0) == 7.0
+
+
+@pytest.mark.parametrize(("algo", "name"), [(DENFAC, "denfac"), (SoftDENFAC, "soft_denfac")])
+def test_the_kept_return_is_logged(algo: type[DENFAC], name: str) -> None:
+    """With checkpoints the algorithm writes ``train/best_return`` (the kept actor's value) beside its usual keys."""
+    from stable_baselines3.common.logger import KVWriter, Logger
+
+    from sb3_denfac.common.logging_keys import WITH_AN_OPTION, WRITTEN_BY
+
+    class Values(KVWriter):
+        def __init__(self) -> None:
+            self.dumps: list[dict[str, Any]] = []
+
+        def write(self, key_values: dict, key_excluded: dict, step: int = 0) -> None:
+            self.dumps.append(dict(key_values))
+
+    values = Values()
+    model = algo("MlpPolicy", "Pendulum-v1", checkpoint_episodes=1, **SMALL)
+    model.set_logger(Logger(folder=None, output_formats=[values]))
+    model.learn(1000, log_interval=1)
+    written = {key for dump in values.dumps for key in dump if key.startswith("train/")}
+    assert WITH_AN_OPTION["train/best_return"][0] == "checkpoint_episodes"
+    assert written == {*WRITTEN_BY[name], "train/best_return"}
+    assert values.dumps[-1]["train/best_return"] == pytest.approx(model.checkpoint_return)
+    logged = [dump["train/best_return"] for dump in values.dumps if "train/best_return" in dump]
+    assert len(logged) >= 4 and logged == sorted(logged)  # at each episode's end, the best so far

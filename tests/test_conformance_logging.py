@@ -20,7 +20,7 @@ from stable_baselines3.common.callbacks import ProgressBarCallback as SB3Progres
 from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_denfac  # noqa: F401  (registers the paper envs)
-from sb3_denfac.common.logging_keys import RENAMED, TRAIN_KEYS, WRITTEN_BY
+from sb3_denfac.common.logging_keys import RENAMED, TRAIN_KEYS, WITH_AN_OPTION, WRITTEN_BY
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 #: The algorithm (zoo name, the key of ``WRITTEN_BY``) of each tiny variant of conftest.py.
@@ -82,10 +82,11 @@ def test_train_keys_are_the_documented_ones(name: str, episode_steps, make_env, 
 
 def test_logging_keys_table_is_the_module() -> None:
     """docs/conventions.md's logging-keys table has one row per key of TRAIN_KEYS, with its meaning and the algorithms
-    that write it (WRITTEN_BY), in the module's order."""
+    that write it (WRITTEN_BY; WITH_AN_OPTION: "(x)"), in the module's order."""
     columns = ["denfac", "soft_denfac", "ddpg", "nfac", "cacla", "cmaes"]
     assert set(WRITTEN_BY) == set(columns)
     assert all(key in TRAIN_KEYS for keys in WRITTEN_BY.values() for key in keys)
+    assert all(key in TRAIN_KEYS and set(algos) <= set(columns) for key, (_, algos) in WITH_AN_OPTION.items())
     rows = [line for line in (REPO / "docs" / "conventions.md").read_text().splitlines() if line.startswith("| `train/")]
     table = {}
     for row in rows:
@@ -95,7 +96,8 @@ def test_logging_keys_table_is_the_module() -> None:
     assert list(table) == list(TRAIN_KEYS)
     for key, (meaning, marks) in table.items():
         assert meaning == TRAIN_KEYS[key], key
-        assert marks == ["x" if key in WRITTEN_BY[algo] else "-" for algo in columns], key
+        with_option = WITH_AN_OPTION.get(key, ("", ()))[1]
+        assert marks == ["x" if key in WRITTEN_BY[algo] else "(x)" if algo in with_option else "-" for algo in columns], key
 
 
 @pytest.mark.algorithms("all")

@@ -3,7 +3,8 @@
 A key means the same thing in every algorithm that writes it; SB3's own names are used where SB3 has one
 (``train/n_updates``, ``train/actor_loss``, ``train/critic_loss``; SB3's single ``train/learning_rate`` is split into
 the two networks' rates). docs/conventions.md shows this list as a table, and tests/test_conformance_logging.py checks
-that each algorithm writes exactly the keys :data:`WRITTEN_BY` gives it. SB3's ``rollout/`` and ``time/`` keys are
+that each algorithm writes exactly the keys :data:`WRITTEN_BY` gives it (and those of :data:`WITH_AN_OPTION` with
+the option on). SB3's ``rollout/`` and ``time/`` keys are
 written by SB3 (CMA-ES writes the same ones itself) and are not listed here.
 """
 
@@ -37,7 +38,8 @@ TRAIN_KEYS: dict[str, str] = {
     "train/ent_coef_loss": "the tuned alpha's loss of SAC's eq. 18 at the last actor step (0 with a fixed alpha)",
     "train/actor_out_of_bounds": "fraction of the actor's raw outputs outside [-1, 1] (unbounded actor)",
     "train/cma_sigma": "CMA-ES's step size sigma after the generation",
-    "train/best_return": "best candidate return seen so far",
+    "train/best_return": "best candidate return seen so far (CMA-ES: of the candidates evaluated; DENFAC and SoftDENFAC "
+    "with checkpoint_episodes: the kept actor's assessment, model.checkpoint_return, written at episode ends)",
     "train/generation_mean_return": "mean return of the generation's candidates",
     "train/generation_best_return": "best return of the generation's candidates",
     "train/population_size": "candidates in the generation",
@@ -77,6 +79,12 @@ WRITTEN_BY: dict[str, tuple[str, ...]] = {
         "train/generation_best_return",
         "train/population_size",
     ),
+}
+
+#: ``train/`` key -> the option with which, and the algorithms (zoo names) that, also write it (not in their
+#: :data:`WRITTEN_BY`, which holds what they write with their defaults).
+WITH_AN_OPTION: dict[str, tuple[str, tuple[str, ...]]] = {
+    "train/best_return": ("checkpoint_episodes", ("denfac", "soft_denfac")),
 }
 
 #: Keys written by sb3-denfac 0.4 and earlier -> their names since 0.5 (CHANGELOG.md).
