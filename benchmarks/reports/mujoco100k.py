@@ -371,8 +371,7 @@ def report(results_dir: str | Path) -> str:
         *targets(runs),
         "",
         "The same targets for the preset with policy checkpoints (`soft_crossq_wide_rho15_checkpoints`: the same "
-        "training, seed by seed, where neither run was resumed from a checkpoint, which draws new random streams; its "
-        "evaluations play the actor of the best training episode so far):\n",
+        "training seed by seed unless a run resumed; evaluations play the actor of the best training episode):\n",
         *targets(runs, "soft_crossq_wide_rho15_checkpoints"),
         "",
         "![evaluation curves](mujoco100k.png)",
