@@ -217,6 +217,8 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
 
 
 #: Colours: the rows run here bold, the published curves thin and dashed.
+#: the preset with policy checkpoints over one episode and over three (their targets follow the preset's)
+CHECKPOINT_ROWS = ("soft_crossq_wide_rho15_checkpoints", "soft_crossq_wide_rho15_checkpoints3")
 ROW_COLOURS = {
     "denfac_default": "black",
     "denfac_rho2": "tab:orange",
@@ -370,9 +372,9 @@ def report(results_dir: str | Path) -> str:
         "published CrossQ, final / best at least 0.8, CPU per run at most SB3 SAC's here.\n",
         *targets(runs),
         "",
-        "The same targets for the preset with policy checkpoints (`soft_crossq_wide_rho15_checkpoints`: the same "
-        "training seed by seed unless a run resumed; evaluations play the actor of the best training episode):\n",
-        *targets(runs, "soft_crossq_wide_rho15_checkpoints"),
+        "The same for the preset with policy checkpoints over one episode (the same training unless a run resumed) "
+        "and over three: the evaluations play the kept actor.",
+        *[line for algo in CHECKPOINT_ROWS for line in (f"\n`{algo}`:\n", *targets(runs, algo))],
         "",
         "![evaluation curves](mujoco100k.png)",
         "",
