@@ -275,3 +275,29 @@ def test_the_kept_return_is_logged(algo: type[DENFAC], name: str) -> None:
     assert values.dumps[-1]["train/best_return"] == pytest.approx(model.checkpoint_return)
     logged = [dump["train/best_return"] for dump in values.dumps if "train/best_return" in dump]
     assert len(logged) >= 4 and logged == sorted(logged)  # at each episode's end, the best so far
+
+
+def test_updates_held_by_an_assessment_are_each_reported() -> None:
+    """n = 3: an assessment's held updates run back to back; ``last_updates`` keeps them all, so the statistics callback
+    and the benchmark's count of critic gradient steps see every one."""
+    from benchmarks.runner.task import GradientSteps
+    from sb3_denfac.common.callbacks import UpdateStatsCallback
+    from sb3_denfac.denfac.options import fitted_iterations
+
+    model = DENFAC("MlpPolicy", "Pendulum-v1", checkpoint_episodes=3, update_to_data_ratio=0.1, **SMALL)
+    seen: list[Any] = []
+    steps = GradientSteps()
+    groups: list[int] = []  # updates run since the last rollout, at each rollout's start
+
+    class Groups(BaseCallback):
+        def _on_rollout_start(self) -> None:
+            groups.append(self.model._n_updates - sum(groups))
+
+        def _on_step(self) -> bool:
+            return True
+
+    model.learn(3000, callback=[UpdateStatsCallback(seen.append), steps, Groups()])
+    assert max(groups) == 3  # an assessment held two episodes' updates: three ran back to back
+    assert model._n_updates == 15 and [s.n_updates for s in seen] == list(range(1, 16))
+    k = fitted_iterations(model.n_fitted_iterations, model.critic_steps, model.update_to_data_ratio, 200)
+    assert steps.total() == 15 * k * model.critic_steps

@@ -170,8 +170,9 @@ class GradientSteps(BaseCallback):
     """Critic gradient steps taken so far, for a like-for-like count across algorithms.
 
     SB3's off-policy algorithms (TD3, SAC, CrossQ, this package's DDPG) count one ``_n_updates`` per critic gradient
-    step. DENFAC counts updates (episode ends); each runs ``train/fitted_iterations`` iterations of ``critic_steps``
-    critic steps, read from the logger after every update. On-policy and actor-only algorithms have no Q critic: None.
+    step. DENFAC counts updates (episode ends); each runs K_e fitted iterations of ``critic_steps`` critic steps, read
+    from ``model.last_updates`` after every rollout (several updates when an assessment of policy checkpoints held
+    them). On-policy and actor-only algorithms have no Q critic: None.
     """
 
     def __init__(self) -> None:
@@ -185,8 +186,8 @@ class GradientSteps(BaseCallback):
     def _on_rollout_start(self) -> None:  # after the update that followed the last rollout
         model = self.model
         if hasattr(model, "n_fitted_iterations") and model._n_updates != self._seen_updates:
-            iterations = model.logger.name_to_value.get("train/fitted_iterations", model.n_fitted_iterations)
-            self.denfac_steps += int(iterations) * int(model.critic_steps)
+            new = [stats for stats in model.last_updates if stats.n_updates > self._seen_updates]
+            self.denfac_steps += sum(stats.fitted_iterations for stats in new) * int(model.critic_steps)
             self._seen_updates = model._n_updates
 
     def total(self) -> int | None:

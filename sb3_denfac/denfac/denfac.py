@@ -367,11 +367,12 @@ class DENFAC(InputChecksMixin, ProgressBarMixin, ActorCriticRatesMixin, Episodic
     def _record(self, fits: list[FitResult]) -> None:
         """Count the updates ``fits`` (run back to back), keep their statistics (:attr:`last_update`,
         :attr:`last_updates`) and log them; in the model's thread."""
+        kept = max(2 * self.n_envs, len(fits))  # all of these (held by an assessment: several with one env)
         for fit in fits:
             self._n_updates += 1
             stats = UpdateStats(self._n_updates, fit.fitted_iterations, fit.seconds, fit.q_targets, fit.weights, fit.rows)
             self.last_update = stats
-            self.last_updates = [*self.last_updates, stats][-2 * self.n_envs :]
+            self.last_updates = [*self.last_updates, stats][-kept:]
             self._record_update(fit.updater, fit.critic_loss, fit.actor_objective, fit.clipped, fit.n_transitions)
 
     def _record_update(
