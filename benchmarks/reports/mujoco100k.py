@@ -216,9 +216,9 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-#: Colours: the rows run here bold, the published curves thin and dashed.
 #: the preset with policy checkpoints over one episode and over three (their targets follow the preset's)
 CHECKPOINT_ROWS = ("soft_crossq_wide_rho15_checkpoints", "soft_crossq_wide_rho15_checkpoints3")
+#: Colours: the rows run here bold, the published curves thin and dashed.
 ROW_COLOURS = {
     "denfac_default": "black",
     "denfac_rho2": "tab:orange",
