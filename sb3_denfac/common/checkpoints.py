@@ -57,8 +57,11 @@ class Assessment:
         whole = [float(returns[i]) for i in np.flatnonzero(dones) if versions[i] == version]
         versions[dones] = _NEW
         returns[dones] = 0.0
-        kept = [value for value in (self._take(r, version, best) for r in whole) if value is not None]
-        return kept[0] if kept else None  # at most one: the assessment ends with it
+        for episode_return in whole:
+            value = self._take(episode_return, version, best)
+            if value is not None:  # the assessment ends with it: the later episodes are not read
+                return value
+        return None
 
     def _take(self, episode_return: float, version: int, best: float | None) -> float | None:
         """A whole episode of actor ``version``: its assessment ends at its n-th episode, with the minimum of their

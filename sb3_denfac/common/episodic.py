@@ -291,7 +291,7 @@ class EpisodicOffPolicyAlgorithm(OffPolicyAlgorithm):
         keep = self._assessment.step(rewards, dones, warm_up, self._policy_version, self.checkpoint_return)
         if keep is not None:
             self.policy.save_checkpoint(keep)
-        if keep is not None or (dones.any() and self.checkpoint_return is not None):
+        if dones.any() and self.checkpoint_return is not None:  # a value is kept only at an episode's end
             self.logger.record("train/best_return", self.checkpoint_return)  # common/logging_keys.py
         return self._assessment.going_on(self._policy_version)
 
