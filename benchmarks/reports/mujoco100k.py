@@ -18,53 +18,27 @@ their source) are the reference: in the table, the last one logged at or before 
 from __future__ import annotations
 
 import argparse
-import functools
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from benchmarks.reports.frontier import (
+    FRONTIER_METHODS,
+    frontier,
+    frontier_at_budget,
+    published,
+    published_mean,
+    reference_table,
+)
 from benchmarks.reports.tables import env_order, provenance, provenance_line
 from benchmarks.runner import store
 from benchmarks.runner.algos import ALGOS
 from benchmarks.runner.suites import MUJOCO100K_ENVS
 
-_BENCHMARKS = Path(__file__).resolve().parents[1]
-FRONTIER_CSV = _BENCHMARKS / "configs" / "frontier_100k.csv"
-#: The published methods drawn in the figure and listed in the table, in this order.
-FRONTIER_METHODS = ("SAC (UTD 1)", "REDQ (UTD 20)", "DroQ (UTD 20)", "CrossQ (UTD 1)", "SimbaV2 (UTD 2)", "MR.Q")
-
-
-@functools.cache
-def _frontier_csv() -> pd.DataFrame:
-    return pd.read_csv(FRONTIER_CSV, comment="#")
-
-
-def frontier() -> pd.DataFrame:
-    """The published curves: method, env, env_step, mean, std, n_seeds, source. ``env`` is the v5 id this suite runs;
-    the published runs are on its v4 twin (the same task with minor model fixes)."""
-    curves = _frontier_csv().copy()
-    curves["env"] = curves["env"].str.replace("-v4", "-v5")
-    return curves
-
-
-def frontier_at_budget(budget: int = 100_000) -> pd.DataFrame:
-    """Per (method, env): the last published evaluation at or before ``budget`` steps."""
-    curves = frontier()
-    curves = curves[curves["env_step"] <= budget].sort_values("env_step")
-    return curves.groupby(["method", "env"], as_index=False).tail(1).reset_index(drop=True)
-
-
-def published(ref: pd.DataFrame, method: str, env: str) -> pd.Series | None:
-    """The row of ``ref`` (:func:`frontier_at_budget`) for ``method`` on ``env``, None if it was not published."""
-    hit = ref[(ref["method"] == method) & (ref["env"] == env)]
-    return None if hit.empty else hit.iloc[0]
-
-
-def _published_mean(ref: pd.DataFrame, method: str, env: str) -> float:
-    row = published(ref, method, env)
-    return float("nan") if row is None else float(row["mean"])
+#: the suite's results folder (the report's default)
+RESULTS = Path(__file__).resolve().parents[1] / "results" / "mujoco100k"
 
 
 def load(results_dir: str | Path) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -146,23 +120,6 @@ def env_table(runs: pd.DataFrame, env: str) -> pd.DataFrame:
     return pd.DataFrame(lines)
 
 
-def reference_table(envs: Sequence[str]) -> pd.DataFrame:
-    """The published figures at 100k steps on ``envs`` (v5 names; the published runs are on v4)."""
-    ref = frontier_at_budget()
-    lines = []
-    for method in FRONTIER_METHODS:
-        line = {"method": method}
-        for env in envs:
-            row = published(ref, method, env)
-            line[env] = (
-                "-"
-                if row is None
-                else f"{row['mean']:.0f} ± {row['std']:.0f} ({row['n_seeds']} seeds, at {row['env_step'] / 1000:.0f}k)"
-            )
-        lines.append(line)
-    return pd.DataFrame(lines)
-
-
 def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str = "sac_zoo") -> list[str]:
     """The data-efficient preset's targets for ``algo`` (docs/denfac.md), each met or missed with its figures (medians
     over seeds): at least the published SAC and SB3 SAC here (``peer``), at least half the published CrossQ, final /
@@ -180,7 +137,7 @@ def targets(runs: pd.DataFrame, algo: str = "denfac_data_efficient", peer: str =
             out.append(f"- {env}: no finished runs yet")
             continue
         final, n = here["final"].median(), len(here)
-        sac, crossq = _published_mean(ref, "SAC (UTD 1)", env), _published_mean(ref, "CrossQ (UTD 1)", env)
+        sac, crossq = published_mean(ref, "SAC (UTD 1)", env), published_mean(ref, "CrossQ (UTD 1)", env)
         checks = [
             ("the published SAC", sac),
             (f"SB3 SAC here ({peer_n.get(env, 0)} seeds)", peer_final.get(env, float("nan"))),
@@ -210,7 +167,7 @@ def steps_to_level(evals: pd.DataFrame, budget: int = 100_000) -> pd.DataFrame:
     ref = frontier_at_budget(budget)
     rows = []
     for (algo, env, seed), e in evals.groupby(["algo", "env", "seed"], sort=False):
-        level = _published_mean(ref, "SAC (UTD 1)", env)
+        level = published_mean(ref, "SAC (UTD 1)", env)
         hit = e.loc[e["score"] >= level, "timesteps"]  # NaN level (not published): never reached
         rows.append({"algo": algo, "env": env, "seed": seed, "level": level, "steps": hit.min() if len(hit) else np.nan})
     return pd.DataFrame(rows)
@@ -392,7 +349,7 @@ def report(results_dir: str | Path) -> str:
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--results", default=str(_BENCHMARKS / "results" / "mujoco100k"), help="the study's folder")
+    parser.add_argument("--results", default=str(RESULTS), help="the study's folder")
     args = parser.parse_args(argv)
     report(args.results)
     print(f"wrote {Path(args.results) / 'mujoco100k.md'}")
